@@ -1,0 +1,41 @@
+"""Small rigid-body helpers (quaternions are MuJoCo's w, x, y, z)."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+
+def quat_z(yaw: float) -> np.ndarray:
+    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+
+
+def mat_to_quat(mat: np.ndarray) -> np.ndarray:
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(mat, dtype=float).reshape(9))
+    return quat
+
+
+def quat_to_mat(quat: np.ndarray) -> np.ndarray:
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, np.asarray(quat, dtype=float))
+    return mat.reshape(3, 3)
+
+
+def look_at_quat(pos, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Orientation of a MuJoCo camera at ``pos`` looking at ``target`` (camera looks along -z)."""
+    forward = np.asarray(target, float) - np.asarray(pos, float)
+    forward /= np.linalg.norm(forward)
+    x = np.cross(forward, up)
+    x /= np.linalg.norm(x)
+    y = np.cross(-forward, x)
+    return mat_to_quat(np.stack([x, y, -forward], axis=1))
+
+
+def yaw_of(mat: np.ndarray) -> float:
+    """Heading of a body's x axis in the horizontal plane."""
+    return float(np.arctan2(mat[1, 0], mat[0, 0]))
+
+
+def wrap_angle(a: float) -> float:
+    return float((a + np.pi) % (2 * np.pi) - np.pi)

@@ -1,0 +1,135 @@
+"""A compiled station: stepping with interpolated setpoints, proprioception, rendering."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from rmbench.sim import robot
+from rmbench.sim.gl import require_rendering
+from rmbench.sim.station import MAX_QVEL, SimulationError, StationConfig, home_action
+
+ACTION_DIM = 14
+
+
+class Simulator:
+    """Owns the MjModel/MjData of one compiled scene and the robot's index tables."""
+
+    def __init__(self, model: mujoco.MjModel, config: StationConfig):
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.config = config
+        m = model
+        # Per side: 6 arm joint qpos/qvel addresses, then the two finger joints.
+        self.arm_qpos = {}
+        self.arm_dof = {}
+        self.finger_qpos = {}
+        self.arm_act = {}
+        self.finger_act = {}
+        for side in robot.SIDES:
+            joints = [m.joint(f"{side}/{j}") for j in robot.ARM_JOINTS]
+            self.arm_qpos[side] = np.array([j.qposadr[0] for j in joints])
+            self.arm_dof[side] = np.array([j.dofadr[0] for j in joints])
+            self.finger_qpos[side] = np.array(
+                [m.joint(f"{side}/{f}").qposadr[0] for f in ("left_finger", "right_finger")])
+            self.arm_act[side] = np.array([m.actuator(f"{side}/{j}").id for j in robot.ARM_JOINTS])
+            self.finger_act[side] = np.array(
+                [m.actuator(f"{side}/{f}").id for f in ("left_finger", "right_finger")])
+        self.ctrl_lo = m.actuator_ctrlrange[:, 0].copy()
+        self.ctrl_hi = m.actuator_ctrlrange[:, 1].copy()
+        self.arm_range = {
+            side: m.jnt_range[[m.joint(f"{side}/{j}").id for j in robot.ARM_JOINTS]]
+            for side in robot.SIDES}
+        self.action_low = np.concatenate(
+            [np.append(self.arm_range[s][:, 0], 0.0) for s in robot.SIDES])
+        self.action_high = np.concatenate(
+            [np.append(self.arm_range[s][:, 1], 1.0) for s in robot.SIDES])
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._target = np.zeros(m.nu)
+
+    # ------------------------------------------------------------------ state
+    def reset_robot(self, action: np.ndarray | None = None) -> None:
+        """Put both arms exactly at ``action`` (default: home) at rest."""
+        action = home_action() if action is None else np.asarray(action, float)
+        ctrl = self.action_to_ctrl(action)
+        for side in robot.SIDES:
+            self.data.qpos[self.arm_qpos[side]] = ctrl[self.arm_act[side]]
+            self.data.qpos[self.finger_qpos[side]] = ctrl[self.finger_act[side]]
+        self.data.qvel[:] = 0.0
+        self.data.ctrl[:] = ctrl
+        self._target = ctrl.copy()
+        mujoco.mj_forward(self.model, self.data)
+
+    def action_to_ctrl(self, action: np.ndarray) -> np.ndarray:
+        ctrl = np.zeros(self.model.nu)
+        for k, side in enumerate(robot.SIDES):
+            a = action[7 * k: 7 * k + 7]
+            ctrl[self.arm_act[side]] = a[:6]
+            finger = robot.FINGER_CLOSED + a[6] * (robot.FINGER_OPEN - robot.FINGER_CLOSED)
+            ctrl[self.finger_act[side]] = (finger, -finger)
+        return ctrl
+
+    def agent_pos(self) -> np.ndarray:
+        """Proprioception in the action layout: 6 joints + gripper opening in [0, 1], per arm."""
+        out = np.empty(ACTION_DIM)
+        span = robot.FINGER_OPEN - robot.FINGER_CLOSED
+        for k, side in enumerate(robot.SIDES):
+            out[7 * k: 7 * k + 6] = self.data.qpos[self.arm_qpos[side]]
+            finger = self.data.qpos[self.finger_qpos[side][0]]
+            out[7 * k + 6] = (finger - robot.FINGER_CLOSED) / span
+        return out
+
+    # ---------------------------------------------------------------- control
+    def clip_action(self, action: np.ndarray) -> tuple[np.ndarray, int]:
+        """Clip to joint limits and gripper [0, 1]; return the clipped action and how many."""
+        clipped = np.clip(action, self.action_low, self.action_high)
+        return clipped, int(np.count_nonzero(clipped != action))
+
+    def step(self, action: np.ndarray, on_substep=None) -> None:
+        """Run one control period towards ``action`` (already validated and clipped)."""
+        start = self._target
+        goal = self.action_to_ctrl(action)
+        n = self.config.substeps
+        for i in range(1, n + 1):
+            self.data.ctrl[:] = start + (goal - start) * (i / n)
+            mujoco.mj_step(self.model, self.data)
+            if on_substep is not None:
+                on_substep()
+        self._target = goal
+        self.check_physics()
+
+    def check_physics(self) -> None:
+        d = self.data
+        if not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
+            raise SimulationError(f"non-finite state at t={d.time:.3f}s")
+        vmax = float(np.abs(d.qvel).max(initial=0.0))
+        if vmax > MAX_QVEL:
+            raise SimulationError(f"runaway velocity {vmax:.1f} at t={d.time:.3f}s")
+        if d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0:
+            raise SimulationError(f"unstable accelerations (mjWARN_BADQACC) at t={d.time:.3f}s")
+
+    # -------------------------------------------------------------- rendering
+    def renderer(self, width: int, height: int) -> mujoco.Renderer:
+        key = (width, height)
+        if key not in self._renderers:
+            require_rendering()
+            r = mujoco.Renderer(self.model, height=height, width=width)
+            for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION,
+                         mujoco.mjtRndFlag.mjRND_SKYBOX):
+                r.scene.flags[flag] = False
+            self._renderers[key] = r
+        return self._renderers[key]
+
+    def render(self, cameras=None, width=None, height=None) -> dict[str, np.ndarray]:
+        cameras = self.config.cameras if cameras is None else cameras
+        r = self.renderer(width or self.config.width, height or self.config.height)
+        frames = {}
+        for cam in cameras:
+            r.update_scene(self.data, camera=cam)
+            frames[cam] = r.render()  # a fresh array per call
+        return frames
+
+    def close(self) -> None:
+        for r in self._renderers.values():
+            r.close()
+        self._renderers.clear()
