@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
+import functools
+import weakref
+
 import mujoco
 import numpy as np
 
@@ -10,6 +14,15 @@ from rmbench.sim.gl import require_rendering
 from rmbench.sim.station import MAX_QVEL, SimulationError, StationConfig, home_action
 
 ACTION_DIM = 14
+# Renderers freed by the garbage collector after MuJoCo's own exit hook has terminated the
+# EGL display make EGL raise. Our hook is registered after the first context exists, i.e.
+# after MuJoCo's, so it runs first (atexit is last-in, first-out) and closes them in time.
+_LIVE: weakref.WeakSet = weakref.WeakSet()
+
+
+@functools.cache
+def _register_exit_hook() -> None:
+    atexit.register(lambda: [sim.close() for sim in list(_LIVE)])
 
 
 class Simulator:
@@ -118,6 +131,8 @@ class Simulator:
                          mujoco.mjtRndFlag.mjRND_SKYBOX):
                 r.scene.flags[flag] = False
             self._renderers[key] = r
+            _LIVE.add(self)
+            _register_exit_hook()
         return self._renderers[key]
 
     def render(self, cameras=None, width=None, height=None) -> dict[str, np.ndarray]:

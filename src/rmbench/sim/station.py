@@ -112,7 +112,8 @@ def base_spec(config: StationConfig) -> mujoco.MjSpec:
                        pos=[x, y, z / 2], size=[0.06, 0.06, z / 2], rgba=[0.2, 0.2, 0.22, 1],
                        contype=0, conaffinity=0)
     for pos, direction in (((-1, -1, 2.5), (1, 1, -2.5)), ((1, -1, 2.5), (-1, 1, -2.5))):
-        world.add_light(pos=pos, dir=direction, directional=True, castshadow=False,
+        world.add_light(pos=list(pos), dir=list(direction), type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+                        castshadow=0,
                         diffuse=[0.35, 0.35, 0.35], specular=[0.1, 0.1, 0.1])
     _add_camera(spec, "head", (0.0, -0.55, 1.50), (0.0, -0.05, TABLE_TOP), fovy=58)
     _add_camera(spec, "third_person", (0.95, 0.55, 1.45), (0.0, -0.12, TABLE_TOP), fovy=45)

@@ -1,0 +1,155 @@
+"""The Gymnasium environment: one task on the station.
+
+Observation (gym-aloha / LeRobot layout): ``pixels`` (camera -> HxWx3 uint8) and
+``agent_pos`` (14,) = 6 left joints, left gripper opening in [0, 1], 6 right joints, right
+gripper. Action: the same 14-vector of absolute targets, applied at 20 Hz.
+
+Reward: the increase of the task's progress this step, so an episode's return equals the
+best progress reached (1.0 on success). Termination on success, task failure or a physics
+error; truncation at the task's step limit.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from rmbench.sim.simulator import ACTION_DIM, Simulator
+from rmbench.sim.station import SimulationError, StationConfig, base_spec
+from rmbench.tasks import get_task
+from rmbench.tasks.base import Evaluation, Task
+
+log = logging.getLogger(__name__)
+SETTLE_STEPS = 50  # physics steps (0.1 s) after placing objects, before the first frame
+
+
+class RMBenchEnv(gym.Env):
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(self, task: str | type[Task] = "put_back_block", *,
+                 cameras: tuple[str, ...] | list[str] | None = None, width: int = 320,
+                 height: int = 240, render: bool = True, instructions: str = "seen",
+                 render_mode: str | None = "rgb_array", step_limit: int | None = None):
+        task_cls = get_task(task) if isinstance(task, str) else task
+        if instructions not in ("seen", "unseen"):
+            raise ValueError(f"instructions must be 'seen' or 'unseen', got {instructions!r}")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
+        kwargs = {} if cameras is None else {"cameras": tuple(cameras)}
+        self.config = StationConfig(width=width, height=height, render=render, **kwargs)
+        self.task: Task = task_cls()
+        spec = base_spec(self.config)
+        self.task.build(spec)
+        self.sim = Simulator(spec.compile(), self.config)
+        self.task.bind(self.sim.model, self.sim.data)
+        self.instructions = instructions
+        self.render_mode = render_mode
+        self.step_limit = step_limit or task_cls.step_limit
+
+        agent_pos = gym.spaces.Box(-np.inf, np.inf, (ACTION_DIM,), np.float64)
+        spaces: dict[str, gym.Space] = {"agent_pos": agent_pos}
+        if render:
+            spaces["pixels"] = gym.spaces.Dict({
+                cam: gym.spaces.Box(0, 255, (height, width, 3), np.uint8)
+                for cam in self.config.cameras})
+        self.observation_space = gym.spaces.Dict(spaces)
+        self.action_space = gym.spaces.Box(self.sim.action_low.astype(np.float32),
+                                           self.sim.action_high.astype(np.float32),
+                                           dtype=np.float32)
+        self._steps = 0
+        self._done = True
+        self._last: Evaluation | None = None
+        self.instruction = ""
+
+    # ------------------------------------------------------------------------ api
+    @property
+    def spec_info(self) -> dict[str, Any]:
+        t = type(self.task)
+        return {"task": t.name, "gym_id": t.gym_id, "tmc": t.tmc, "step_limit": self.step_limit,
+                "subtasks": list(t.subtasks)}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        sim, task = self.sim, self.task
+        mujoco.mj_resetData(sim.model, sim.data)
+        sim.reset_robot()
+        task.initialize(self.np_random)
+        mujoco.mj_forward(sim.model, sim.data)
+        for _ in range(SETTLE_STEPS):
+            mujoco.mj_step(sim.model, sim.data)
+        pool = (type(task).instructions_seen if self.instructions == "seen"
+                else type(task).instructions_unseen)
+        self.instruction = pool[int(self.np_random.integers(len(pool)))]
+        self._steps = 0
+        self._done = False
+        self._last = task.evaluate()
+        plan = task.plan()
+        info = {**self.spec_info, "instruction": self.instruction, "plan": plan,
+                "hidden": task.hidden_state(), **self._subtask_info(self._last, ended=False)}
+        return self._observation(), info
+
+    def step(self, action):
+        if self._done:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        action = self._validate(action)
+        clipped, n_clipped = self.sim.clip_action(action)
+        stage_before = self._last.stage
+        info: dict[str, Any] = {"clipped_targets": n_clipped}
+        try:
+            self.sim.step(clipped, on_substep=self.task.on_substep)
+        except SimulationError as err:
+            log.warning("physics error in %s: %s", type(self.task).name, err)
+            self._done = True
+            info.update(sim_error=str(err), is_success=False, progress=self._last.progress,
+                        failure_reason=f"sim error: {err}")
+            return self._observation(safe=True), 0.0, True, False, info
+        ev = self.task.evaluate()
+        reward = ev.progress - self._last.progress
+        self._last = ev
+        self._steps += 1
+        terminated = ev.success or ev.failure
+        truncated = not terminated and self._steps >= self.step_limit
+        self._done = terminated or truncated
+        info.update(is_success=ev.success, failure=ev.failure, failure_reason=ev.failure_reason,
+                    progress=ev.progress, predicates=ev.predicates, step=self._steps,
+                    **self._subtask_info(ev, ended=ev.stage > stage_before))
+        return self._observation(), float(reward), terminated, truncated, info
+
+    def render(self):
+        return self.sim.render(["third_person"], *self.config.video_size)["third_person"]
+
+    def close(self):
+        self.sim.close()
+
+    # ------------------------------------------------------------------- helpers
+    def _subtask_info(self, ev: Evaluation, ended: bool) -> dict[str, Any]:
+        plan = self.task.plan()
+        idx = plan[ev.stage] if ev.stage < len(plan) else -1
+        return {"subtask": type(self.task).subtasks[idx] if idx >= 0 else "done",
+                "subtask_index": idx, "subtask_step": ev.stage, "subtask_end": ended}
+
+    def _validate(self, action) -> np.ndarray:
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (ACTION_DIM,):
+            raise ValueError(f"action must have shape ({ACTION_DIM},), got {a.shape}")
+        if not np.isfinite(a).all():
+            bad = np.flatnonzero(~np.isfinite(a)).tolist()
+            raise ValueError(f"action has NaN/inf at indices {bad}")
+        return a
+
+    def _observation(self, safe: bool = False) -> dict[str, Any]:
+        pos = self.sim.agent_pos()
+        if safe:
+            pos = np.nan_to_num(pos, nan=0.0, posinf=0.0, neginf=0.0)
+        obs: dict[str, Any] = {"agent_pos": pos}
+        if self.config.render:
+            if safe:
+                obs["pixels"] = {c: np.zeros((self.config.height, self.config.width, 3), np.uint8)
+                                 for c in self.config.cameras}
+            else:
+                obs["pixels"] = self.sim.render()
+        return obs

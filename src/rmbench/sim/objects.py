@@ -1,0 +1,232 @@
+"""Scene pieces shared by the tasks: cubes, mats, spring buttons, seven-segment tiles.
+
+Each piece adds itself to an MjSpec at build time (``build``), looks its ids up once after
+compilation (``bind``), and is then placed per episode. Static pieces (mats, buttons, tiles)
+are moved by editing ``model.body_pos`` at reset, so one compiled model serves every seed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from rmbench.sim.station import TABLE_TOP
+
+BOX = mujoco.mjtGeom.mjGEOM_BOX
+CYLINDER = mujoco.mjtGeom.mjGEOM_CYLINDER
+RED = (0.85, 0.1, 0.1, 1.0)
+MAT_RGBA = (0.15, 0.35, 0.75, 1.0)
+
+
+def _explicit_inertia(body, mass: float, half_sizes) -> None:
+    """Solid-box inertia set explicitly (the arm assets restrict inertia-from-geom groups);
+    ipos/iquat must be set too, or MuJoCo keeps a stale centre of mass."""
+    x, y, z = (2 * np.asarray(half_sizes, float)) ** 2
+    body.explicitinertial = True
+    body.mass = mass
+    body.inertia = [mass * (y + z) / 12, mass * (x + z) / 12, mass * (x + y) / 12]
+    body.ipos = [0, 0, 0]
+    body.iquat = [1, 0, 0, 0]
+
+
+@dataclass
+class Cube:
+    """A free cube of edge ``size`` (metres)."""
+
+    name: str
+    size: float = 0.04
+    rgba: tuple = RED
+    mass: float = 0.05
+    body_id: int = -1
+    qpos_adr: int = -1
+    qvel_adr: int = -1
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        h = self.size / 2
+        body = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP + h])
+        body.add_freejoint(name=f"{self.name}/free")
+        body.add_geom(name=f"{self.name}/geom", type=BOX, size=[h, h, h], rgba=list(self.rgba),
+                      friction=[1.0, 0.005, 0.0001], condim=4)
+        _explicit_inertia(body, self.mass, [h, h, h])
+
+    def bind(self, model: mujoco.MjModel) -> None:
+        joint = model.joint(f"{self.name}/free")
+        self.body_id = model.body(self.name).id
+        self.qpos_adr = int(joint.qposadr[0])
+        self.qvel_adr = int(joint.dofadr[0])
+
+    def place(self, data: mujoco.MjData, xy, yaw: float = 0.0, z: float | None = None) -> None:
+        z = TABLE_TOP + self.size / 2 if z is None else z
+        data.qpos[self.qpos_adr: self.qpos_adr + 3] = (xy[0], xy[1], z)
+        data.qpos[self.qpos_adr + 3: self.qpos_adr + 7] = (np.cos(yaw / 2), 0, 0, np.sin(yaw / 2))
+        data.qvel[self.qvel_adr: self.qvel_adr + 6] = 0.0
+
+    def pos(self, data: mujoco.MjData) -> np.ndarray:
+        return data.xpos[self.body_id].copy()
+
+    def yaw(self, data: mujoco.MjData) -> float:
+        mat = data.xmat[self.body_id].reshape(3, 3)
+        return float(np.arctan2(mat[1, 0], mat[0, 0]))
+
+    def resting(self, data: mujoco.MjData, tol: float = 0.005) -> bool:
+        """On the table (or a mat), not moving."""
+        speed = np.linalg.norm(data.qvel[self.qvel_adr: self.qvel_adr + 3])
+        return abs(self.pos(data)[2] - (TABLE_TOP + self.size / 2)) < tol and speed < 0.02
+
+
+@dataclass
+class StaticPiece:
+    """A fixed body whose table position changes per episode (mats, tiles, button bases)."""
+
+    name: str
+    body_id: int = -1
+
+    def bind(self, model: mujoco.MjModel) -> None:
+        self.body_id = model.body(self.name).id
+
+    def move(self, model: mujoco.MjModel, xy) -> None:
+        model.body_pos[self.body_id][:2] = xy
+
+    def xy(self, model: mujoco.MjModel) -> np.ndarray:
+        return model.body_pos[self.body_id][:2].copy()
+
+
+@dataclass
+class Mat(StaticPiece):
+    """A thin square mat lying on the table; identical mats are what make layouts alias."""
+
+    size: float = 0.08
+    thickness: float = 0.002
+    rgba: tuple = MAT_RGBA
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        body = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP])
+        # Visual only: a 2 mm collision slab would make cubes rock at its edge.
+        body.add_geom(name=f"{self.name}/geom", type=BOX,
+                      size=[self.size / 2, self.size / 2, self.thickness / 2],
+                      pos=[0, 0, self.thickness / 2], rgba=list(self.rgba),
+                      contype=0, conaffinity=0)
+
+    def contains(self, model: mujoco.MjModel, xy, tol: float) -> bool:
+        return bool(np.linalg.norm(np.asarray(xy)[:2] - self.xy(model)) <= tol)
+
+
+@dataclass
+class Button(StaticPiece):
+    """A spring-loaded push button with press counting.
+
+    The cap slides down along z against a preloaded spring (joint stiffness with springref
+    above the upper limit). A press counts once per push: the cap must travel past
+    ``press_depth`` and come back above ``release_depth`` before it can count again.
+    """
+
+    cap_rgba: tuple = (0.9, 0.15, 0.15, 1.0)
+    radius: float = 0.025
+    travel: float = 0.01
+    press_depth: float = 0.006
+    release_depth: float = 0.003
+    base_height: float = 0.02
+    cap_height: float = 0.015
+    count: int = 0
+    armed: bool = True
+    qpos_adr: int = -1
+    just_pressed: bool = False
+    press_times: list = field(default_factory=list)
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        base = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP])
+        base.add_geom(name=f"{self.name}/base", type=CYLINDER,
+                      size=[self.radius + 0.012, self.base_height / 2],
+                      pos=[0, 0, self.base_height / 2], rgba=[0.25, 0.25, 0.28, 1])
+        cap = base.add_body(name=f"{self.name}/cap", pos=[0, 0, self.base_height])
+        # 1 cm travel, 300 N/m spring preloaded to 1.2 N, damped, stiff end stops.
+        cap.add_joint(name=f"{self.name}/slide", type=mujoco.mjtJoint.mjJNT_SLIDE,
+                      axis=[0, 0, 1], range=[-self.travel, 0.0], stiffness=300.0,
+                      springref=0.004, damping=3.0, solref_limit=[0.004, 1.0])
+        cap.add_geom(name=f"{self.name}/cap", type=CYLINDER,
+                     size=[self.radius, self.cap_height / 2], pos=[0, 0, self.cap_height / 2],
+                     rgba=list(self.cap_rgba), friction=[1.0, 0.005, 0.0001])
+        _explicit_inertia(cap, 0.02, [self.radius, self.radius, self.cap_height / 2])
+
+    def bind(self, model: mujoco.MjModel) -> None:
+        super().bind(model)
+        self.qpos_adr = int(model.joint(f"{self.name}/slide").qposadr[0])
+
+    def reset(self) -> None:
+        self.count = 0
+        self.armed = True
+        self.just_pressed = False
+        self.press_times = []
+
+    def depth(self, data: mujoco.MjData) -> float:
+        return float(-data.qpos[self.qpos_adr])
+
+    def top(self, model: mujoco.MjModel) -> np.ndarray:
+        """World position of the centre of the cap's top face at rest."""
+        x, y, z = model.body_pos[self.body_id]
+        return np.array([x, y, z + self.base_height + self.cap_height])
+
+    def update(self, data: mujoco.MjData) -> None:
+        """Call after every physics step: counts a press on the way down."""
+        d = self.depth(data)
+        if self.armed and d >= self.press_depth:
+            self.count += 1
+            self.armed = False
+            self.just_pressed = True
+            self.press_times.append(float(data.time))
+        elif not self.armed and d <= self.release_depth:
+            self.armed = True
+
+
+# Seven-segment layout: segment -> (centre x, centre y, horizontal?) in units of the digit
+# height, and which segments each digit lights.
+_SEGMENTS = {"a": (0.0, 0.5, True), "b": (0.25, 0.25, False), "c": (0.25, -0.25, False),
+             "d": (0.0, -0.5, True), "e": (-0.25, -0.25, False), "f": (-0.25, 0.25, False),
+             "g": (0.0, 0.0, True)}
+DIGIT_SEGMENTS = {0: "abcdef", 1: "bc", 2: "abdeg", 3: "abcdg", 4: "bcfg", 5: "acdfg",
+                  6: "acdefg", 7: "abc", 8: "abcdefg", 9: "abcdfg"}
+
+
+@dataclass
+class NumberTile(StaticPiece):
+    """A flat 6 x 9 cm tile showing one digit as seven 1 cm-wide segments.
+
+    All seven segments exist in the model; a digit is shown by colouring the lit ones dark
+    and the others like the tile, so one compiled model shows any digit.
+    """
+
+    width: float = 0.06
+    height: float = 0.09
+    seg_width: float = 0.01
+    tile_rgba: tuple = (0.95, 0.95, 0.9, 1.0)
+    ink_rgba: tuple = (0.05, 0.05, 0.05, 1.0)
+    seg_ids: dict = field(default_factory=dict)
+    digit: int = 0
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        body = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP])
+        body.add_geom(name=f"{self.name}/tile", type=BOX,
+                      size=[self.width / 2, self.height / 2, 0.002], pos=[0, 0, 0.002],
+                      rgba=list(self.tile_rgba), contype=0, conaffinity=0)
+        span = self.height - 2 * self.seg_width  # distance between the outer horizontal bars
+        for seg, (cx, cy, horizontal) in _SEGMENTS.items():
+            length = span / 2 + self.seg_width
+            size = ([length / 2, self.seg_width / 2, 0.0005] if horizontal
+                    else [self.seg_width / 2, length / 2, 0.0005])
+            body.add_geom(name=f"{self.name}/seg_{seg}", type=BOX, size=size,
+                          pos=[cx * span, cy * span, 0.0045], rgba=list(self.tile_rgba),
+                          contype=0, conaffinity=0)
+
+    def bind(self, model: mujoco.MjModel) -> None:
+        super().bind(model)
+        self.seg_ids = {s: model.geom(f"{self.name}/seg_{s}").id for s in _SEGMENTS}
+
+    def show(self, model: mujoco.MjModel, digit: int) -> None:
+        if digit not in DIGIT_SEGMENTS:
+            raise ValueError(f"a tile shows one digit 0-9, got {digit}")
+        self.digit = digit
+        for seg, gid in self.seg_ids.items():
+            lit = seg in DIGIT_SEGMENTS[digit]
+            model.geom_rgba[gid] = self.ink_rgba if lit else self.tile_rgba

@@ -1,0 +1,7 @@
+"""Tasks: one file per task, registered by name and gym id."""
+
+from rmbench.tasks import press_button, put_back_block  # noqa: F401  (registers)
+from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.registry import TASKS, UnknownTaskError, get_task
+
+__all__ = ["TASKS", "Evaluation", "Task", "UnknownTaskError", "get_task"]

@@ -1,0 +1,111 @@
+"""The task framework: one subclass per task, the same hooks in the same order.
+
+A task (1) builds its objects into the station's MjSpec, (2) binds ids after compilation,
+(3) initialises an episode from the Generator handed to ``reset(seed)``, (4) is told after
+every physics step (button counting, event latches), and (5) ``evaluate()``s named
+predicates once per control step. Reward, termination, ``info["is_success"]``, progress and
+the ground-truth subtask all derive from those predicates in :mod:`rmbench.envs.env`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import mujoco
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """What a task says about the current state, once per control step.
+
+    success: the task is solved (episode terminates).
+    failure: the task can no longer be solved, with ``failure_reason`` (episode terminates).
+    progress: in [0, 1], the furthest stage reached so far (monotone within an episode).
+    stage: index of the ground-truth current subtask in ``Task.plan``; len(plan) once done.
+    predicates: every named boolean/number the above were derived from, for logs and tests.
+    """
+
+    success: bool
+    failure: bool
+    progress: float
+    stage: int
+    failure_reason: str = ""
+    predicates: dict[str, Any] = field(default_factory=dict)
+
+
+class Task:
+    """Base class. Subclasses set the class attributes and implement the hooks."""
+
+    name: ClassVar[str]
+    gym_id: ClassVar[str]
+    tmc: ClassVar[str]  # "M(1)" or "M(n)"
+    step_limit: ClassVar[int]  # policy steps at the control rate
+    subtasks: ClassVar[tuple[str, ...]]  # distinct subtask texts; plan() indexes into these
+    instructions_seen: ClassVar[tuple[str, ...]]
+    instructions_unseen: ClassVar[tuple[str, ...]]
+    aliasing_point: ClassVar[str]
+
+    def __init__(self):
+        self.model: mujoco.MjModel | None = None
+        self.data: mujoco.MjData | None = None
+        self._stage = 0
+        self._best_progress = 0.0
+
+    # -- hooks ------------------------------------------------------------------------
+    def build(self, spec: mujoco.MjSpec) -> None:
+        raise NotImplementedError
+
+    def bind(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        self.model, self.data = model, data
+        self._fingers = {model.geom(f"{side}/10_{f}_gripper_finger").id
+                         for side in ("left", "right") for f in ("left", "right")}
+
+    def initialize(self, rng: np.random.Generator) -> None:
+        """Sample the episode's layout and hidden variables; place everything."""
+        raise NotImplementedError
+
+    def on_substep(self) -> None:
+        """Called after every physics step."""
+
+    def evaluate(self) -> Evaluation:
+        raise NotImplementedError
+
+    def plan(self) -> list[int]:
+        """The episode's subtask sequence as indices into ``subtasks`` (after initialize)."""
+        raise NotImplementedError
+
+    def hidden_state(self) -> dict[str, Any]:
+        """The episode's hidden variables (what memory must recover), JSON-serialisable."""
+        return {}
+
+    # -- shared helpers -----------------------------------------------------------------
+    def begin_episode(self) -> None:
+        self._stage = 0
+        self._best_progress = 0.0
+
+    def advance(self, stage: int, progress: float) -> tuple[int, float]:
+        """Stages and progress only move forward within an episode."""
+        self._stage = max(self._stage, stage)
+        self._best_progress = max(self._best_progress, progress)
+        return self._stage, self._best_progress
+
+    def touched_by_fingers(self, body_id: int) -> bool:
+        """Whether any gripper finger is in contact with ``body_id``."""
+        fingers = self._fingers
+        d, m = self.data, self.model
+        for i in range(d.ncon):
+            g1, g2 = d.contact[i].geom1, d.contact[i].geom2
+            if (g1 in fingers and m.geom_bodyid[g2] == body_id) or (
+                    g2 in fingers and m.geom_bodyid[g1] == body_id):
+                return True
+        return False
+
+    def gripper_opening(self, side: str) -> float:
+        from rmbench.sim import robot
+        q = self.data.qpos[self.model.joint(f"{side}/left_finger").qposadr[0]]
+        return float((q - robot.FINGER_CLOSED) / (robot.FINGER_OPEN - robot.FINGER_CLOSED))
+
+    def grippers_open(self, threshold: float = 0.6) -> bool:
+        return all(self.gripper_opening(s) > threshold for s in ("left", "right"))

@@ -1,0 +1,129 @@
+"""press_button — M(n).
+
+Task: three buttons in a row (left, middle, confirm) and two number tiles behind the left
+and middle buttons showing d1 and d2. Press the left button d1 times and the middle button
+d2 times (left arm), then the confirm button once (right arm).
+
+Randomization: d1 ~ U{1..9}, d2 ~ U{1..10-d1}; row y ~ U[-0.16, -0.12]; left button
+x ~ U[-0.30, -0.24], middle 0.13-0.16 m to its right, confirm x ~ U[0.18, 0.26]; tiles
+0.12 m behind the left and middle buttons.
+
+Success: the confirm button pressed once, when the left count was exactly d1 and the middle
+count exactly d2. A press counts once per push (travel past 6 mm, back above 3 mm).
+Failure: more than d1 (d2) presses of the left (middle) button; a confirm with wrong counts;
+any press after the confirm.
+
+Memory: TMC M(n). Aliasing point: a released button looks the same after any number of
+presses; only the past tells how many have been made (the count grows with the episode).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rmbench.sim.objects import Button, NumberTile
+from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.registry import register
+
+TILE_OFFSET = 0.12
+
+
+@register
+class PressButton(Task):
+    name = "press_button"
+    gym_id = "rmbench/PressButton-v0"
+    tmc = "M(n)"
+    step_limit = 1500
+    subtasks = ("press the left button", "press the middle button", "press the confirm button")
+    instructions_seen = (
+        "Press the left button as many times as its number shows, the middle button as many "
+        "times as its number shows, then press the confirm button.",
+        "Push each of the two buttons the number of times written behind it, then confirm.",
+        "Count out the left number on the left button and the middle number on the middle "
+        "button, then hit confirm.",
+        "Press the left and middle buttons the shown numbers of times and finish with the "
+        "confirm button.",
+    )
+    instructions_unseen = (
+        "Tap the left button to match its digit, tap the middle one to match its digit, and "
+        "then press confirm.",
+        "Enter the two displayed numbers by pressing their buttons, then press the confirm "
+        "button once.",
+    )
+    aliasing_point = "between presses: a released button looks the same after any count"
+
+    def __init__(self):
+        super().__init__()
+        self.left = Button("button_left")
+        self.middle = Button("button_middle")
+        self.confirm = Button("button_confirm", cap_rgba=(0.15, 0.7, 0.2, 1.0))
+        self.tiles = (NumberTile("tile_left"), NumberTile("tile_middle"))
+        self.d1 = self.d2 = 1
+        self.events: list[str] = []
+
+    @property
+    def buttons(self) -> dict[str, Button]:
+        return {"left": self.left, "middle": self.middle, "confirm": self.confirm}
+
+    def build(self, spec) -> None:
+        for piece in (*self.buttons.values(), *self.tiles):
+            piece.build(spec)
+
+    def bind(self, model, data) -> None:
+        super().bind(model, data)
+        for piece in (*self.buttons.values(), *self.tiles):
+            piece.bind(model)
+
+    def initialize(self, rng: np.random.Generator) -> None:
+        self.begin_episode()
+        self.d1 = int(rng.integers(1, 10))
+        self.d2 = int(rng.integers(1, 11 - self.d1))
+        y = rng.uniform(-0.16, -0.12)
+        xl = rng.uniform(-0.30, -0.24)
+        xm = xl + rng.uniform(0.13, 0.16)
+        xc = rng.uniform(0.18, 0.26)
+        for button, x in ((self.left, xl), (self.middle, xm), (self.confirm, xc)):
+            button.move(self.model, (x, y))
+            button.reset()
+        for tile, x, digit in ((self.tiles[0], xl, self.d1), (self.tiles[1], xm, self.d2)):
+            tile.move(self.model, (x, y + TILE_OFFSET))
+            tile.show(self.model, digit)
+        self.events = []
+
+    def plan(self) -> list[int]:
+        return [0] * self.d1 + [1] * self.d2 + [2]
+
+    def hidden_state(self) -> dict:
+        return {"d1": self.d1, "d2": self.d2}
+
+    def on_substep(self) -> None:
+        for name, button in self.buttons.items():
+            button.update(self.data)
+            if button.just_pressed:
+                button.just_pressed = False
+                self.events.append(name)
+
+    def evaluate(self) -> Evaluation:
+        counts = {n: b.count for n, b in self.buttons.items()}
+        preds = {"left_presses": counts["left"], "middle_presses": counts["middle"],
+                 "confirm_presses": counts["confirm"], "d1": self.d1, "d2": self.d2}
+        reason = ""
+        confirmed_at = self.events.index("confirm") if "confirm" in self.events else None
+        if counts["left"] > self.d1:
+            reason = f"left button pressed {counts['left']} times, needed {self.d1}"
+        elif counts["middle"] > self.d2:
+            reason = f"middle button pressed {counts['middle']} times, needed {self.d2}"
+        elif confirmed_at is not None:
+            before = self.events[:confirmed_at]
+            if before.count("left") != self.d1 or before.count("middle") != self.d2:
+                reason = (f"confirmed after {before.count('left')} left and "
+                          f"{before.count('middle')} middle presses, needed {self.d1} and {self.d2}")
+            elif len(self.events) > confirmed_at + 1:
+                reason = "button pressed after the confirm"
+        success = confirmed_at is not None and not reason
+        stage = min(counts["left"], self.d1) + min(counts["middle"], self.d2) + \
+            min(counts["confirm"], 1)
+        total = self.d1 + self.d2 + 1
+        stage, progress = self.advance(stage if not reason else 0, stage / total if not reason else 0)
+        return Evaluation(success=success, failure=bool(reason), progress=progress, stage=stage,
+                          failure_reason=reason, predicates=preds)

@@ -1,0 +1,144 @@
+"""put_back_block — M(1).
+
+Task: four identical mats lie around a centre point; a red cube sits on one of them. Move
+the cube to the centre, press the button with the left arm, then put the cube back on the
+mat it came from.
+
+Randomization: centre x ~ U[-0.02, 0.06], y ~ U[-0.115, -0.095]; mat offset from the centre
+d ~ U[0.10, 0.13] (left, right, front, back); the cube's mat uniformly among the four, with
+yaw ~ U[-0.4, 0.4]; button x ~ U[-0.38, -0.30], y ~ U[-0.22, -0.12].
+
+Success: exactly one press, made while the cube was at the centre (within 4 cm); afterwards
+the cube rests on its original mat (within 3 cm) and no finger touches it.
+Failure: a second press; a press before the cube reached the centre; the cube released on a
+wrong mat after the press; the cube off the table.
+
+Memory: TMC M(1). Aliasing point: with the cube at the centre (before and after the press)
+the four mats look the same; only the first frames tell which mat to return to.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rmbench.sim.objects import Button, Cube, Mat
+from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.registry import register
+
+MAT_NAMES = ("left", "right", "front", "back")
+MAT_DIRECTIONS = {"left": (-1, 0), "right": (1, 0), "front": (0, -1), "back": (0, 1)}
+CENTRE_TOL = 0.04
+MAT_TOL = 0.03
+
+
+@register
+class PutBackBlock(Task):
+    name = "put_back_block"
+    gym_id = "rmbench/PutBackBlock-v0"
+    tmc = "M(1)"
+    step_limit = 500
+    subtasks = ("move the block to the centre", "press the button",
+                "put the block back on its original mat")
+    instructions_seen = (
+        "Move the red block to the centre, press the button, then put the block back where it was.",
+        "Bring the block to the middle of the mats, press the button, and return the block to its mat.",
+        "Place the cube at the centre, push the button once, then put the cube back on its original mat.",
+        "Carry the red cube to the centre point, press the button, and return it to the mat it started on.",
+    )
+    instructions_unseen = (
+        "Shift the cube into the middle, hit the button, then restore the cube to its starting mat.",
+        "Take the block to the centre, press the button one time, and put it back on the mat it came from.",
+    )
+    aliasing_point = "cube at the centre, around the press: the four mats look identical"
+
+    def __init__(self):
+        super().__init__()
+        self.cube = Cube("cube", size=0.04)
+        self.mats = {n: Mat(f"mat_{n}") for n in MAT_NAMES}
+        self.button = Button("button")
+        self.centre = np.zeros(2)
+        self.original = "left"
+        self.pressed_at_centre = False
+        self.press_without_centre = False
+
+    def build(self, spec) -> None:
+        for mat in self.mats.values():
+            mat.build(spec)
+        self.button.build(spec)
+        self.cube.build(spec)
+
+    def bind(self, model, data) -> None:
+        super().bind(model, data)
+        for piece in (*self.mats.values(), self.button, self.cube):
+            piece.bind(model)
+
+    def initialize(self, rng: np.random.Generator) -> None:
+        self.begin_episode()
+        self.centre = np.array([rng.uniform(-0.02, 0.06), rng.uniform(-0.115, -0.095)])
+        d = rng.uniform(0.10, 0.13)
+        for n, mat in self.mats.items():
+            mat.move(self.model, self.centre + d * np.asarray(MAT_DIRECTIONS[n]))
+        self.original = MAT_NAMES[int(rng.integers(4))]
+        self.button.move(self.model, (rng.uniform(-0.38, -0.30), rng.uniform(-0.22, -0.12)))
+        self.button.reset()
+        self.cube.place(self.data, self.mats[self.original].xy(self.model),
+                        yaw=rng.uniform(-0.4, 0.4))
+        self.pressed_at_centre = False
+        self.press_without_centre = False
+
+    def plan(self) -> list[int]:
+        return [0, 1, 2]
+
+    def hidden_state(self) -> dict:
+        return {"original_mat": self.original, "centre": self.centre.round(4).tolist()}
+
+    def cube_at_centre(self) -> bool:
+        return bool(np.linalg.norm(self.cube.pos(self.data)[:2] - self.centre) <= CENTRE_TOL)
+
+    def on_substep(self) -> None:
+        self.button.update(self.data)
+        if self.button.just_pressed:
+            self.button.just_pressed = False
+            if self.button.count == 1 and self.cube_at_centre():
+                self.pressed_at_centre = True
+            else:
+                self.press_without_centre = True
+
+    def mat_under_cube(self) -> str | None:
+        xy = self.cube.pos(self.data)[:2]
+        for n, mat in self.mats.items():
+            if mat.contains(self.model, xy, MAT_TOL):
+                return n
+        return None
+
+    def evaluate(self) -> Evaluation:
+        pos = self.cube.pos(self.data)
+        released = not self.touched_by_fingers(self.cube.body_id)
+        settled = self.cube.resting(self.data) and released
+        at_centre = self.cube_at_centre()
+        presses = self.button.count
+        on_mat = self.mat_under_cube()
+        back = presses == 1 and self.pressed_at_centre and on_mat == self.original and settled
+        preds = {"cube_at_centre": at_centre, "cube_settled": settled, "presses": presses,
+                 "pressed_at_centre": self.pressed_at_centre, "mat_under_cube": on_mat or "",
+                 "original_mat": self.original}
+        reason = ""
+        if presses > 1:
+            reason = "button pressed more than once"
+        elif self.press_without_centre:
+            reason = "button pressed before the block was at the centre"
+        elif presses == 1 and settled and on_mat not in (None, self.original):
+            reason = f"block put back on the wrong mat ({on_mat} instead of {self.original})"
+        elif pos[2] < TABLE_TOP - 0.05:
+            reason = "block fell off the table"
+        stage = 0
+        if at_centre and settled:
+            stage = 1
+        if self.pressed_at_centre:
+            stage = 2
+        if back:
+            stage = 3
+        stage, progress = self.advance(stage, stage / 3)
+        return Evaluation(success=back and not reason, failure=bool(reason), progress=progress,
+                          stage=stage, failure_reason=reason, predicates=preds)

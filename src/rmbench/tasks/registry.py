@@ -1,0 +1,37 @@
+"""Task registry: a decorator fills it and refuses duplicates."""
+
+from __future__ import annotations
+
+from rmbench.tasks.base import Task
+
+TASKS: dict[str, type[Task]] = {}
+
+
+class UnknownTaskError(KeyError):
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0])
+
+
+def register(cls: type[Task]) -> type[Task]:
+    for attr in ("name", "gym_id", "tmc", "step_limit", "subtasks", "instructions_seen",
+                 "instructions_unseen", "aliasing_point"):
+        if not hasattr(cls, attr):
+            raise TypeError(f"task {cls.__name__} does not declare {attr}")
+    if cls.tmc not in ("M(1)", "M(n)"):
+        raise ValueError(f"task {cls.name}: TMC label must be M(1) or M(n), got {cls.tmc}")
+    for key in (cls.name, cls.gym_id):
+        if key in TASKS or any(t.gym_id == key for t in TASKS.values()):
+            raise ValueError(f"task {key!r} is already registered")
+    TASKS[cls.name] = cls
+    return cls
+
+
+def get_task(name: str) -> type[Task]:
+    """A task class by name (``put_back_block``) or gym id (``rmbench/PutBackBlock-v0``)."""
+    if name in TASKS:
+        return TASKS[name]
+    for cls in TASKS.values():
+        if cls.gym_id == name:
+            return cls
+    known = ", ".join(sorted(TASKS))
+    raise UnknownTaskError(f"unknown task {name!r}; known tasks: {known}")
