@@ -1,0 +1,69 @@
+"""Scripted experts: the policy interface over a plan of labelled motion primitives."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+import numpy as np
+
+from rmbench.experts.ik import ArmIK
+from rmbench.experts.motion import Actions, Motion
+from rmbench.tasks.base import Task
+
+EXPERTS: dict[str, type[ScriptedExpert]] = {}
+
+
+def register_expert(cls):
+    if cls.task in EXPERTS:
+        raise ValueError(f"an expert for {cls.task!r} is already registered")
+    EXPERTS[cls.task] = cls
+    return cls
+
+
+class ScriptedExpert:
+    """Solves one task from privileged state. ``act`` returns the next 14-d action and sets
+    ``subtask_index`` / ``subtask`` to the subtask that action belongs to."""
+
+    task: ClassVar[str]
+
+    def __init__(self, env):
+        self.env = env.unwrapped
+        self.ik = ArmIK()
+        self._plan: Iterator[tuple[np.ndarray, int]] | None = None
+        self._last: np.ndarray | None = None
+        self.subtask_index = 0
+        self.subtask = ""
+        self.finished = False
+
+    def reset(self, instruction: str = "", task_info: dict[str, Any] | None = None) -> None:
+        self.motion = Motion(self.ik)
+        self._plan = self.plan(self.env.task)
+        self._last = self.motion.cmd.copy()
+        self.finished = False
+
+    def act(self, observation=None) -> np.ndarray:
+        if self._plan is None:
+            raise RuntimeError("call reset() before act()")
+        try:
+            action, self.subtask_index = next(self._plan)
+            self._last = action
+        except StopIteration:
+            self.finished = True  # plan done: hold still while the task registers the end
+        self.subtask = type(self.env.task).subtasks[self.subtask_index]
+        return self._last.copy()
+
+    def plan(self, task: Task) -> Iterator[tuple[np.ndarray, int]]:
+        raise NotImplementedError
+
+    @staticmethod
+    def label(subtask: int, actions: Actions) -> Iterator[tuple[np.ndarray, int]]:
+        for a in actions:
+            yield a, subtask
+
+
+def make_expert(env) -> ScriptedExpert:
+    name = type(env.unwrapped.task).name
+    if name not in EXPERTS:
+        raise KeyError(f"no scripted expert for task {name!r}; experts exist for {sorted(EXPERTS)}")
+    return EXPERTS[name](env)

@@ -1,0 +1,148 @@
+"""Motion primitives shared by every scripted expert.
+
+A :class:`Motion` keeps the commanded 14-d target (what the servos are tracking) and turns
+high-level moves into per-control-step actions. Every primitive is a generator of actions,
+so experts compose them with ``yield from`` and read the live scene between primitives.
+Cartesian moves are straight lines of the grasp site with minimum-jerk timing, solved by IK
+step by step from the previous solution; moves from far away (home) go in joint space.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+
+from rmbench.experts.ik import ArmIK, top_down_quat
+from rmbench.sim.station import ARM_MOUNTS, HOME_ARM, home_action
+
+DT = 0.05  # control period (20 Hz)
+FINGER_TIP_BELOW_SITE = 0.017  # fingertips reach this far below the grasp site
+HOVER = 0.10  # approach height of the grasp site above its target
+CARRY_SPEED = 0.30  # m/s
+FINE_SPEED = 0.15  # m/s, last centimetres of descents
+JOINT_SPEED = 1.6  # rad/s, joint-space moves
+CLOSED, OPEN = 0.0, 1.0
+
+Actions = Iterator[np.ndarray]
+
+
+def min_jerk(n: int) -> np.ndarray:
+    """n samples in (0, 1] of the minimum-jerk profile."""
+    s = np.arange(1, n + 1) / n
+    return 10 * s**3 - 15 * s**4 + 6 * s**5
+
+
+def natural_yaw(side: str, xy) -> float:
+    """Finger axis for a top-down grasp with the wrist unrotated: across the reach direction."""
+    bx, by, _ = ARM_MOUNTS[side].pos
+    return float(np.arctan2(xy[1] - by, xy[0] - bx) + np.pi / 2)
+
+
+def grasp_yaw(side: str, xy, object_yaw: float, symmetry: float = np.pi / 2) -> float:
+    """Of the object's symmetric grasp yaws, the one closest to the arm's natural yaw."""
+    nat = natural_yaw(side, xy)
+    k = np.round((nat - object_yaw) / symmetry)
+    return float(object_yaw + k * symmetry)
+
+
+class Motion:
+    def __init__(self, ik: ArmIK):
+        self.ik = ik
+        self.cmd = home_action()
+
+    @staticmethod
+    def _slice(side: str) -> slice:
+        return slice(0, 6) if side == "left" else slice(7, 13)
+
+    @staticmethod
+    def _grip(side: str) -> int:
+        return 6 if side == "left" else 13
+
+    def joints(self, side: str) -> np.ndarray:
+        return self.cmd[self._slice(side)].copy()
+
+    def site_pos(self, side: str) -> np.ndarray:
+        return self.ik.forward(side, self.joints(side))[0]
+
+    # -------------------------------------------------------------- primitives
+    def hold(self, steps: int) -> Actions:
+        for _ in range(steps):
+            yield self.cmd.copy()
+
+    def gripper(self, side: str, value: float, steps: int = 6) -> Actions:
+        start = self.cmd[self._grip(side)]
+        for s in min_jerk(steps):
+            self.cmd[self._grip(side)] = start + (value - start) * s
+            yield self.cmd.copy()
+
+    def move_joints(self, side: str, target: np.ndarray, speed: float = JOINT_SPEED) -> Actions:
+        start = self.joints(side)
+        n = max(int(np.ceil(np.abs(target - start).max() / (speed * DT) * 1.5)), 2)
+        for s in min_jerk(n):
+            self.cmd[self._slice(side)] = start + (target - start) * s
+            yield self.cmd.copy()
+
+    def move_to(self, side: str, pos, yaw: float, speed: float = CARRY_SPEED) -> Actions:
+        """Straight line of the grasp site to ``pos`` with the gripper pointing down."""
+        start = self.site_pos(side)
+        pos = np.asarray(pos, float)
+        n = max(int(np.ceil(np.linalg.norm(pos - start) / (speed * DT) * 1.5)), 2)
+        quat = top_down_quat(yaw)
+        q = self.joints(side)
+        for s in min_jerk(n):
+            q, _ = self.ik.solve(side, start + (pos - start) * s, quat, seed=q)
+            self.cmd[self._slice(side)] = q
+            yield self.cmd.copy()
+
+    def approach(self, side: str, pos, yaw: float) -> Actions:
+        """From anywhere (e.g. home) to a top-down pose at ``pos`` through joint space."""
+        q, err = self.ik.solve(side, pos, top_down_quat(yaw))
+        if err > 0.005:
+            raise RuntimeError(f"{side} arm cannot reach {np.round(pos, 3)} (IK error {err:.3f} m)")
+        yield from self.move_joints(side, q)
+
+    def go_home(self, side: str) -> Actions:
+        yield from self.move_joints(side, np.array(HOME_ARM[side]))
+
+    def move_by(self, side: str, delta, yaw: float, speed: float = CARRY_SPEED) -> Actions:
+        yield from self.move_to(side, self.site_pos(side) + np.asarray(delta), yaw, speed)
+
+    def grasp(self, side: str, centre, yaw: float, height: float) -> Actions:
+        """Open, come down over ``centre`` (the object's centre, ``height`` tall), close, lift."""
+        centre = np.asarray(centre, float)
+        grip_z = centre[2] - height / 2 + FINGER_TIP_BELOW_SITE + 0.010
+        grip = np.array([centre[0], centre[1], max(grip_z, centre[2] - 0.01)])
+        yield from self.gripper(side, OPEN, 4)
+        yield from self.approach(side, grip + (0, 0, HOVER), yaw)
+        yield from self.move_to(side, grip, yaw, FINE_SPEED)
+        yield from self.gripper(side, CLOSED, 8)
+        yield from self.hold(3)
+        yield from self.move_to(side, grip + (0, 0, HOVER), yaw, FINE_SPEED)
+
+    def place(self, side: str, target, yaw: float, height: float) -> Actions:
+        """Carry the held object over ``target`` (table xy, z of the surface), set it down, open,
+        and rise."""
+        target = np.asarray(target, float)
+        release = np.array([target[0], target[1],
+                            target[2] + FINGER_TIP_BELOW_SITE + 0.010 + 0.004])
+        yield from self.move_to(side, release + (0, 0, HOVER), yaw)
+        yield from self.move_to(side, release, yaw, FINE_SPEED)
+        yield from self.gripper(side, OPEN, 6)
+        yield from self.move_to(side, release + (0, 0, HOVER), yaw, FINE_SPEED)
+
+    def press(self, side: str, top, depth: float = 0.012, approach: bool = True) -> Actions:
+        """Push down on the point ``top`` with closed fingers, and come up. ``depth`` is the commanded
+        travel: past the 1 cm end stop, so servo lag still bottoms the button out."""
+        top = np.asarray(top, float)
+        yaw = natural_yaw(side, top)
+        above = top + (0, 0, FINGER_TIP_BELOW_SITE + 0.04)
+        down = top + (0, 0, FINGER_TIP_BELOW_SITE - depth)
+        if approach:
+            yield from self.gripper(side, CLOSED, 4)
+            yield from self.approach(side, above, yaw)
+        else:
+            yield from self.move_to(side, above, yaw)
+        yield from self.move_to(side, down, yaw, FINE_SPEED)
+        yield from self.hold(2)
+        yield from self.move_to(side, above, yaw, FINE_SPEED)
