@@ -13,7 +13,7 @@ class PressButtonExpert(ScriptedExpert):
         m, model = self.motion, task.model
         first = True
         for subtask, button, count in ((0, task.left, task.d1), (1, task.middle, task.d2)):
-            for i in range(count):
+            for _ in range(count):
                 yield from self.label(subtask, m.press("left", button.top(model), approach=first))
                 first = False
         yield from self.label(2, m.go_home("left"))

@@ -116,7 +116,7 @@ def base_spec(config: StationConfig) -> mujoco.MjSpec:
                         castshadow=0,
                         diffuse=[0.35, 0.35, 0.35], specular=[0.1, 0.1, 0.1])
     _add_camera(spec, "head", (0.0, -0.55, 1.50), (0.0, -0.05, TABLE_TOP), fovy=58)
-    _add_camera(spec, "third_person", (0.95, 0.55, 1.45), (0.0, -0.12, TABLE_TOP), fovy=45)
+    _add_camera(spec, "third_person", (0.62, 0.42, 1.30), (0.0, -0.15, TABLE_TOP), fovy=50)
     return spec
 
 

@@ -124,6 +124,8 @@ class PressButton(Task):
         stage = min(counts["left"], self.d1) + min(counts["middle"], self.d2) + \
             min(counts["confirm"], 1)
         total = self.d1 + self.d2 + 1
-        stage, progress = self.advance(stage if not reason else 0, stage / total if not reason else 0)
+        if reason:
+            stage = 0  # a failed episode keeps the progress it had, no more
+        stage, progress = self.advance(stage, stage / total)
         return Evaluation(success=success, failure=bool(reason), progress=progress, stage=stage,
                           failure_reason=reason, predicates=preds)

@@ -26,6 +26,11 @@ def register(cls: type[Task]) -> type[Task]:
     return cls
 
 
+def ordered() -> list[type[Task]]:
+    """Tasks in the benchmark's order: M(1) before M(n), then by name."""
+    return sorted(TASKS.values(), key=lambda c: (c.tmc != "M(1)", c.name))
+
+
 def get_task(name: str) -> type[Task]:
     """A task class by name (``put_back_block``) or gym id (``rmbench/PutBackBlock-v0``)."""
     if name in TASKS:
