@@ -50,7 +50,10 @@ class RMBenchEnv(gym.Env):
         self.render_mode = render_mode
         self.step_limit = step_limit or task_cls.step_limit
 
-        agent_pos = gym.spaces.Box(-np.inf, np.inf, (ACTION_DIM,), np.float64)
+        # Measured joints may sit a hair outside their limits; the bounds leave room for that.
+        margin = np.tile(np.r_[np.full(6, 0.1), 0.5], 2)
+        agent_pos = gym.spaces.Box(self.sim.action_low - margin, self.sim.action_high + margin,
+                                   (ACTION_DIM,), np.float64)
         spaces: dict[str, gym.Space] = {"agent_pos": agent_pos}
         if render:
             spaces["pixels"] = gym.spaces.Dict({

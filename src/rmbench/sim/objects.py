@@ -149,6 +149,9 @@ class Button(StaticPiece):
                      size=[self.radius, self.cap_height / 2], pos=[0, 0, self.cap_height / 2],
                      rgba=list(self.cap_rgba), friction=[1.0, 0.005, 0.0001])
         _explicit_inertia(cap, 0.02, [self.radius, self.radius, self.cap_height / 2])
+        # The base is static, so MuJoCo treats it as part of the world and would let the sinking
+        # cap collide with it; the pair is excluded explicitly.
+        spec.add_exclude(bodyname1=self.name, bodyname2=f"{self.name}/cap")
 
     def bind(self, model: mujoco.MjModel) -> None:
         super().bind(model)

@@ -118,8 +118,12 @@ class Simulator:
         vmax = float(np.abs(d.qvel).max(initial=0.0))
         if vmax > MAX_QVEL:
             raise SimulationError(f"runaway velocity {vmax:.1f} at t={d.time:.3f}s")
-        if d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0:
-            raise SimulationError(f"unstable accelerations (mjWARN_BADQACC) at t={d.time:.3f}s")
+        # MuJoCo resets the state itself when it meets a bad value, so its warnings are the
+        # only trace of a blow-up inside the control period.
+        for warning in ("BADQPOS", "BADQVEL", "BADQACC"):
+            if d.warning[getattr(mujoco.mjtWarning, f"mjWARN_{warning}")].number > 0:
+                raise SimulationError(f"physics diverged (MuJoCo reset the state after "
+                                      f"mjWARN_{warning})")
 
     # -------------------------------------------------------------- rendering
     def renderer(self, width: int, height: int) -> mujoco.Renderer:

@@ -1,0 +1,131 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import rmbench
+from rmbench.experts import make_expert
+from rmbench.sim.station import home_action
+from rmbench.tasks import UnknownTaskError, get_task
+from rmbench.tasks.registry import register
+from tests.conftest import run_expert_steps
+
+
+def test_check_env_on_every_registered_id(task_name):
+    env = gym.make(get_task(task_name).gym_id, width=96, height=72)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+def test_observation_layout(task_name):
+    env = rmbench.make(task_name)
+    obs, info = env.reset(seed=3)
+    assert set(obs["pixels"]) == {"head", "left_wrist", "right_wrist"}
+    assert all(img.shape == (240, 320, 3) and img.dtype == np.uint8
+               for img in obs["pixels"].values())
+    assert obs["agent_pos"].shape == (14,)
+    assert info["instruction"] in get_task(task_name).instructions_seen
+    assert info["subtask"] == get_task(task_name).subtasks[info["plan"][0]]
+    env.close()
+
+
+def test_unseen_instructions_are_held_out(task_name):
+    env = rmbench.make(task_name, render=False, instructions="unseen")
+    _, info = env.reset(seed=1)
+    cls = get_task(task_name)
+    assert info["instruction"] in cls.instructions_unseen
+    assert not set(cls.instructions_seen) & set(cls.instructions_unseen)
+
+
+def test_same_seed_same_episode_bit_for_bit(task_name):
+    runs = []
+    for _ in range(2):
+        env = rmbench.make(task_name, width=128, height=96)
+        runs.append(run_expert_steps(env, make_expert(env), seed=100007, steps=80))
+        env.close()
+    (obs_a, act_a), (obs_b, act_b) = runs
+    assert len(obs_a) == len(obs_b)
+    for a, b in zip(act_a, act_b, strict=True):
+        assert np.array_equal(a, b)
+    for a, b in zip(obs_a, obs_b, strict=True):
+        assert np.array_equal(a["agent_pos"], b["agent_pos"])
+        for cam in a["pixels"]:
+            assert np.array_equal(a["pixels"][cam], b["pixels"][cam])
+
+
+def test_different_seeds_differ(task_name):
+    env = rmbench.make(task_name, render=False)
+    _, a = env.reset(seed=100000)
+    _, b = env.reset(seed=100001)
+    assert a["hidden"] != b["hidden"] or a["instruction"] != b["instruction"]
+
+
+@pytest.mark.parametrize("bad, message", [
+    (np.zeros(13), "shape"),
+    (np.zeros((2, 14)), "shape"),
+    (np.full(14, np.nan), "NaN"),
+    (np.r_[np.zeros(13), np.inf], "NaN/inf at indices \\[13\\]"),
+])
+def test_bad_actions_raise_value_error(bad, message):
+    env = rmbench.make("put_back_block", render=False)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=message):
+        env.step(bad)
+
+
+def test_targets_beyond_limits_are_clipped_and_counted():
+    env = rmbench.make("put_back_block", render=False)
+    env.reset(seed=0)
+    action = home_action()
+    action[0] = 10.0  # waist far past its limit
+    action[6] = 1.5  # gripper above fully open
+    _, _, _, _, info = env.step(action)
+    assert info["clipped_targets"] == 2
+
+
+def test_truncation_at_step_limit():
+    env = rmbench.make("put_back_block", render=False, step_limit=5)
+    obs, _ = env.reset(seed=0)
+    for i in range(5):
+        _, _, terminated, truncated, _ = env.step(obs["agent_pos"])
+        assert not terminated
+        assert truncated == (i == 4)
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(obs["agent_pos"])
+
+
+def test_physics_blow_up_ends_episode_with_sim_error():
+    env = rmbench.make("put_back_block", render=False)
+    obs, _ = env.reset(seed=0)
+    env.unwrapped.sim.data.qvel[:] = np.nan
+    _, reward, terminated, _, info = env.step(obs["agent_pos"])
+    assert terminated and not info["is_success"]
+    assert "diverged" in info["sim_error"] or "non-finite" in info["sim_error"]
+
+
+def test_unknown_task_lists_known_ones():
+    with pytest.raises(UnknownTaskError, match="known tasks: .*put_back_block"):
+        rmbench.make("no_such_task")
+    with pytest.raises(UnknownTaskError, match="known tasks"):
+        get_task("rmbench/NoSuchTask-v0")
+    assert get_task("rmbench/PutBackBlock-v0").name == "put_back_block"
+
+
+def test_registry_refuses_duplicates():
+    cls = get_task("put_back_block")
+    with pytest.raises(ValueError, match="already registered"):
+        register(type("Copy", (cls,), {}))
+    rmbench.register_envs()  # re-registering our own ids is a no-op
+    spec = gym.registry[cls.gym_id]
+    old = spec.kwargs
+    spec.kwargs = {"task": "someone_else"}
+    try:
+        with pytest.raises(ValueError, match="already registered"):
+            rmbench.register_envs()
+    finally:
+        spec.kwargs = old
+
+
+def test_bad_camera_config_is_a_clear_error():
+    with pytest.raises(ValueError, match="unknown camera"):
+        rmbench.make("put_back_block", cameras=("head", "ceiling"))

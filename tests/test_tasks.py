@@ -1,0 +1,135 @@
+"""Success and failure predicates, with the scene set up directly."""
+
+import mujoco
+import numpy as np
+
+import rmbench
+
+
+def settle(env, steps=150):
+    sim = env.unwrapped.sim
+    for _ in range(steps):
+        mujoco.mj_step(sim.model, sim.data)
+        env.unwrapped.task.on_substep()
+
+
+def press(env, button):
+    """Drive a button through a full push the way physics would: down past, then back up."""
+    data = env.unwrapped.sim.data
+    data.qpos[button.qpos_adr] = -button.travel
+    env.unwrapped.task.on_substep()
+    data.qpos[button.qpos_adr] = 0.0
+    env.unwrapped.task.on_substep()
+
+
+def put_back_env(seed=5):
+    env = rmbench.make("put_back_block", render=False)
+    env.reset(seed=seed)
+    return env, env.unwrapped.task
+
+
+def test_put_back_block_success_path():
+    env, task = put_back_env()
+    data, model = task.data, task.model
+    task.cube.place(data, task.centre)
+    settle(env)
+    assert task.evaluate().stage == 1
+    press(env, task.button)
+    ev = task.evaluate()
+    assert ev.stage == 2 and not ev.failure
+    task.cube.place(data, task.mats[task.original].xy(model))
+    settle(env)
+    ev = task.evaluate()
+    assert ev.success and ev.progress == 1.0 and ev.stage == 3
+
+
+def test_put_back_block_wrong_mat_is_failure_not_success():
+    env, task = put_back_env()
+    task.cube.place(task.data, task.centre)
+    settle(env)
+    press(env, task.button)
+    wrong = next(n for n in task.mats if n != task.original)
+    task.cube.place(task.data, task.mats[wrong].xy(task.model))
+    settle(env)
+    ev = task.evaluate()
+    assert not ev.success and ev.failure and "wrong mat" in ev.failure_reason
+
+
+def test_put_back_block_press_before_centre_fails():
+    env, task = put_back_env()
+    press(env, task.button)
+    ev = task.evaluate()
+    assert ev.failure and "before the block" in ev.failure_reason
+
+
+def test_put_back_block_second_press_fails():
+    env, task = put_back_env()
+    task.cube.place(task.data, task.centre)
+    settle(env)
+    press(env, task.button)
+    press(env, task.button)
+    ev = task.evaluate()
+    assert ev.failure and "more than once" in ev.failure_reason
+
+
+def test_put_back_block_untouched_is_neither():
+    env, task = put_back_env()
+    ev = task.evaluate()
+    assert not ev.success and not ev.failure and ev.progress == 0.0
+
+
+def press_button_env(seed=11):
+    env = rmbench.make("press_button", render=False)
+    env.reset(seed=seed)
+    return env, env.unwrapped.task
+
+
+def test_press_button_exact_counts_then_confirm_succeeds():
+    env, task = press_button_env()
+    for _ in range(task.d1):
+        press(env, task.left)
+    for _ in range(task.d2):
+        press(env, task.middle)
+    ev = task.evaluate()
+    assert not ev.success and ev.stage == task.d1 + task.d2
+    press(env, task.confirm)
+    ev = task.evaluate()
+    assert ev.success and ev.progress == 1.0
+
+
+def test_press_button_confirm_with_wrong_count_fails():
+    env, task = press_button_env()
+    for _ in range(task.d1):
+        press(env, task.left)
+    press(env, task.confirm)
+    ev = task.evaluate()
+    assert ev.failure and not ev.success and "confirmed after" in ev.failure_reason
+
+
+def test_press_button_overcount_fails():
+    env, task = press_button_env()
+    for _ in range(task.d1 + 1):
+        press(env, task.left)
+    ev = task.evaluate()
+    assert ev.failure and "left button pressed" in ev.failure_reason
+
+
+def test_press_button_press_after_confirm_fails():
+    env, task = press_button_env()
+    for _ in range(task.d1):
+        press(env, task.left)
+    for _ in range(task.d2):
+        press(env, task.middle)
+    press(env, task.confirm)
+    press(env, task.confirm)
+    assert task.evaluate().failure
+
+
+def test_press_button_tiles_show_the_digits():
+    from rmbench.sim.objects import DIGIT_SEGMENTS
+
+    env, task = press_button_env()
+    for tile, digit in zip(task.tiles, (task.d1, task.d2), strict=True):
+        lit = {s for s, gid in tile.seg_ids.items()
+               if np.allclose(task.model.geom_rgba[gid], tile.ink_rgba)}
+        assert lit == set(DIGIT_SEGMENTS[digit])
