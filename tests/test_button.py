@@ -1,7 +1,6 @@
 """Press counting on the shared spring button, driven through real physics."""
 
 import mujoco
-import numpy as np
 import pytest
 
 from rmbench.sim.objects import Button
