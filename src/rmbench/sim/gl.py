@@ -9,6 +9,7 @@ processes inherit it without probing again. A user's own ``MUJOCO_GL`` is respec
 from __future__ import annotations
 
 import functools
+import logging
 import os
 import subprocess
 import sys
@@ -54,6 +55,10 @@ def select_backend() -> str | None:
     :func:`require_rendering`'s message while physics-only use keeps working.
     """
     chosen = os.environ.get("MUJOCO_GL")
+    if not chosen and "mujoco" in sys.modules:
+        logging.getLogger(__name__).warning(
+            "mujoco was imported before rmbench without MUJOCO_GL set; offscreen rendering may "
+            "fail: import rmbench first or set MUJOCO_GL=egl (or osmesa)")
     if chosen:
         if chosen in BACKENDS:
             os.environ.setdefault("PYOPENGL_PLATFORM", chosen)

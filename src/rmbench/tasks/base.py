@@ -46,6 +46,7 @@ class Task:
     instructions_seen: ClassVar[tuple[str, ...]]
     instructions_unseen: ClassVar[tuple[str, ...]]
     aliasing_point: ClassVar[str]
+    aliasing_stage: ClassVar[int]  # a stage (index into plan) at which the aliasing holds
 
     def __init__(self):
         self.model: mujoco.MjModel | None = None

@@ -14,7 +14,7 @@ class UnknownTaskError(KeyError):
 
 def register(cls: type[Task]) -> type[Task]:
     for attr in ("name", "gym_id", "tmc", "step_limit", "subtasks", "instructions_seen",
-                 "instructions_unseen", "aliasing_point"):
+                 "instructions_unseen", "aliasing_point", "aliasing_stage"):
         if not hasattr(cls, attr):
             raise TypeError(f"task {cls.__name__} does not declare {attr}")
     if cls.tmc not in ("M(1)", "M(n)"):
