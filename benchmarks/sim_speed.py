@@ -15,9 +15,9 @@ import platform
 import time
 from pathlib import Path
 
-import rmbench  # first: it picks the OpenGL backend, which MuJoCo fixes when imported
-
 import mujoco  # noqa: E402, I001
+
+import rmbench  # first: it picks the OpenGL backend, which MuJoCo fixes when imported
 from rmbench.experts import make_expert  # noqa: E402
 
 

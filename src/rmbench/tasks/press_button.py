@@ -51,7 +51,7 @@ class PressButton(Task):
         "button once.",
     )
     aliasing_point = "between presses: a released button looks the same after any count"
-    aliasing_stage = 1  # first ground-truth stage at which the aliasing holds (after the first press)
+    aliasing_stage = 1  # after the first press
 
     def __init__(self):
         super().__init__()

@@ -51,7 +51,7 @@ class PutBackBlock(Task):
         "Take the block to the centre, press the button one time, and put it back on the mat it came from.",
     )
     aliasing_point = "cube at the centre, around the press: the four mats look identical"
-    aliasing_stage = 2  # first ground-truth stage at which the aliasing holds (cube at the centre right after the press)
+    aliasing_stage = 2  # the press has happened; the cube still sits at the centre
 
     def __init__(self):
         super().__init__()
