@@ -15,10 +15,9 @@ import platform
 import time
 from pathlib import Path
 
-import mujoco  # noqa: E402, I001
-
-import rmbench  # first: it picks the OpenGL backend, which MuJoCo fixes when imported
-from rmbench.experts import make_expert  # noqa: E402
+import rmbench  # before anything imports mujoco: it picks the OpenGL backend
+from rmbench.experts import make_expert
+from rmbench.sim.simulator import data_renderer
 
 
 def expert_actions(task: str, seed: int, steps: int):
@@ -56,10 +55,7 @@ def time_bare_render(task: str, seed: int, n: int) -> float:
     env = rmbench.make(task, render=True)
     env.reset(seed=seed)
     sim = env.unwrapped.sim
-    renderer = mujoco.Renderer(sim.model, height=sim.config.height, width=sim.config.width)
-    for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION,
-                 mujoco.mjtRndFlag.mjRND_SKYBOX):
-        renderer.scene.flags[flag] = False
+    renderer = data_renderer(sim.model, sim.config.width, sim.config.height)
     t0 = time.perf_counter()
     for _ in range(n):
         for cam in sim.config.cameras:

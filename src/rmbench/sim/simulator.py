@@ -25,6 +25,16 @@ def _register_exit_hook() -> None:
     atexit.register(lambda: [sim.close() for sim in list(_LIVE)])
 
 
+def data_renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Renderer:
+    """A renderer set up for data cameras: no shadows, reflections or skybox (the model's
+    offscreen buffer already has anti-aliasing off)."""
+    r = mujoco.Renderer(model, height=height, width=width)
+    for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION,
+                 mujoco.mjtRndFlag.mjRND_SKYBOX):
+        r.scene.flags[flag] = False
+    return r
+
+
 class Simulator:
     """Owns the MjModel/MjData of one compiled scene and the robot's index tables."""
 
@@ -130,10 +140,7 @@ class Simulator:
         key = (width, height)
         if key not in self._renderers:
             require_rendering()
-            r = mujoco.Renderer(self.model, height=height, width=width)
-            for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION,
-                         mujoco.mjtRndFlag.mjRND_SKYBOX):
-                r.scene.flags[flag] = False
+            r = data_renderer(self.model, width, height)
             self._renderers[key] = r
             _LIVE.add(self)
             _register_exit_hook()

@@ -107,6 +107,3 @@ class Task:
         from rmbench.sim import robot
         q = self.data.qpos[self.model.joint(f"{side}/left_finger").qposadr[0]]
         return float((q - robot.FINGER_CLOSED) / (robot.FINGER_OPEN - robot.FINGER_CLOSED))
-
-    def grippers_open(self, threshold: float = 0.6) -> bool:
-        return all(self.gripper_opening(s) > threshold for s in ("left", "right"))
