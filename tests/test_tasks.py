@@ -22,10 +22,15 @@ def press(env, button):
     env.unwrapped.task.on_substep()
 
 
-def put_back_env(seed=5):
-    env = rmbench.make("put_back_block", render=False)
+def task_env(name, seed):
+    """A physics-only env of ``name`` reset to ``seed``, and its task."""
+    env = rmbench.make(name, render=False)
     env.reset(seed=seed)
     return env, env.unwrapped.task
+
+
+def put_back_env():
+    return task_env("put_back_block", seed=5)
 
 
 def test_put_back_block_success_path():
@@ -78,10 +83,8 @@ def test_put_back_block_untouched_is_neither():
     assert not ev.success and not ev.failure and ev.progress == 0.0
 
 
-def press_button_env(seed=11):
-    env = rmbench.make("press_button", render=False)
-    env.reset(seed=seed)
-    return env, env.unwrapped.task
+def press_button_env():
+    return task_env("press_button", seed=11)
 
 
 def test_press_button_exact_counts_then_confirm_succeeds():

@@ -133,7 +133,6 @@ class Button(StaticPiece):
     armed: bool = True
     qpos_adr: int = -1
     just_pressed: bool = False
-    press_times: list = field(default_factory=list)
 
     def build(self, spec: mujoco.MjSpec) -> None:
         base = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP])
@@ -161,7 +160,6 @@ class Button(StaticPiece):
         self.count = 0
         self.armed = True
         self.just_pressed = False
-        self.press_times = []
 
     def depth(self, data: mujoco.MjData) -> float:
         return float(-data.qpos[self.qpos_adr])
@@ -178,7 +176,6 @@ class Button(StaticPiece):
             self.count += 1
             self.armed = False
             self.just_pressed = True
-            self.press_times.append(float(data.time))
         elif not self.armed and d <= self.release_depth:
             self.armed = True
 

@@ -102,8 +102,3 @@ class Task:
                     g2 in fingers and m.geom_bodyid[g1] == body_id):
                 return True
         return False
-
-    def gripper_opening(self, side: str) -> float:
-        from rmbench.sim import robot
-        q = self.data.qpos[self.model.joint(f"{side}/left_finger").qposadr[0]]
-        return float((q - robot.FINGER_CLOSED) / (robot.FINGER_OPEN - robot.FINGER_CLOSED))
