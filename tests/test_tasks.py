@@ -87,12 +87,16 @@ def press_button_env():
     return task_env("press_button", seed=11)
 
 
+def enter_digits(env, task):
+    """Press the left button d1 times and the middle one d2 times."""
+    for button, times in ((task.left, task.d1), (task.middle, task.d2)):
+        for _ in range(times):
+            press(env, button)
+
+
 def test_press_button_exact_counts_then_confirm_succeeds():
     env, task = press_button_env()
-    for _ in range(task.d1):
-        press(env, task.left)
-    for _ in range(task.d2):
-        press(env, task.middle)
+    enter_digits(env, task)
     ev = task.evaluate()
     assert not ev.success and ev.stage == task.d1 + task.d2
     press(env, task.confirm)
@@ -119,10 +123,7 @@ def test_press_button_overcount_fails():
 
 def test_press_button_press_after_confirm_fails():
     env, task = press_button_env()
-    for _ in range(task.d1):
-        press(env, task.left)
-    for _ in range(task.d2):
-        press(env, task.middle)
+    enter_digits(env, task)
     press(env, task.confirm)
     press(env, task.confirm)
     assert task.evaluate().failure
