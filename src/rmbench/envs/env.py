@@ -80,6 +80,7 @@ class RMBenchEnv(gym.Env):
         sim, task = self.sim, self.task
         mujoco.mj_resetData(sim.model, sim.data)
         sim.reset_robot()
+        task.set_overrides((options or {}).get("hidden"))
         task.initialize(self.np_random)
         mujoco.mj_forward(sim.model, sim.data)
         for _ in range(SETTLE_STEPS):

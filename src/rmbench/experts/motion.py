@@ -46,6 +46,12 @@ def grasp_yaw(side: str, xy, object_yaw: float, symmetry: float = np.pi / 2) -> 
     return float(object_yaw + k * symmetry)
 
 
+def nearer_side(xy) -> str:
+    """The arm whose base is closer to ``xy`` in the table plane."""
+    d = {side: np.hypot(xy[0] - m.pos[0], xy[1] - m.pos[1]) for side, m in ARM_MOUNTS.items()}
+    return min(d, key=d.get)
+
+
 class Motion:
     def __init__(self, ik: ArmIK):
         self.ik = ik
@@ -130,6 +136,14 @@ class Motion:
         yield from self.move_to(side, release, yaw, FINE_SPEED)
         yield from self.gripper(side, OPEN, 6)
         yield from self.move_to(side, release + (0, 0, HOVER), yaw, FINE_SPEED)
+
+    def transfer(self, side: str, pos, object_yaw: float, height: float, dest,
+                 symmetry: float = np.pi / 2, turn: float = 0.0) -> Actions:
+        """Pick the object at ``pos`` (centre) and set it down at ``dest`` (table xy and surface
+        z), turned by ``turn`` about z."""
+        yaw = grasp_yaw(side, pos[:2], object_yaw, symmetry)
+        yield from self.grasp(side, pos, yaw, height)
+        yield from self.place(side, dest, yaw + turn, height)
 
     def press(self, side: str, top, depth: float = 0.012, approach: bool = True) -> Actions:
         """Push down on the point ``top`` with closed fingers, and come up. ``depth`` is the commanded

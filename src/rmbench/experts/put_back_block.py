@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from rmbench.experts.base import ScriptedExpert, register_expert
-from rmbench.experts.motion import grasp_yaw
 from rmbench.sim.station import TABLE_TOP
 
 
@@ -20,10 +17,8 @@ class PutBackBlockExpert(ScriptedExpert):
         home_xy = task.mats[task.original].xy(model)
 
         def move_cube(dest_xy):
-            pos = task.cube.pos(data)
-            yaw = grasp_yaw(side, pos[:2], task.cube.yaw(data))
-            yield from m.grasp(side, pos, yaw, size)
-            yield from m.place(side, np.array([*dest_xy, TABLE_TOP]), yaw, size)
+            yield from m.transfer(side, task.cube.pos(data), task.cube.yaw(data), size,
+                                  (*dest_xy, TABLE_TOP))
 
         yield from self.label(0, move_cube(task.centre))
         yield from self.label(1, m.go_home(side) if side == "right" else iter(()))

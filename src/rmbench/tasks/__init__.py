@@ -1,6 +1,10 @@
 """Tasks: one file per task, registered by name and gym id."""
 
-from rmbench.tasks import press_button, put_back_block  # noqa: F401  (registers)
+from rmbench.tasks import (  # noqa: F401  (registers)
+    press_button,
+    put_back_block,
+    rearrange_blocks,
+)
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import TASKS, UnknownTaskError, get_task
 

@@ -47,12 +47,17 @@ class Task:
     instructions_unseen: ClassVar[tuple[str, ...]]
     aliasing_point: ClassVar[str]
     aliasing_stage: ClassVar[int]  # a stage (index into plan) at which the aliasing holds
+    # The hidden variables (keys of ``hidden_state()``) that ``reset(options={"hidden": ...})``
+    # may fix: the layout is drawn from the seed as usual, only these values are replaced.
+    # Two episodes that differ only there are how the aliasing tests show a task needs memory.
+    hidden_keys: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self):
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
         self._stage = 0
         self._best_progress = 0.0
+        self.overrides: dict[str, Any] = {}
 
     # -- hooks ------------------------------------------------------------------------
     def build(self, spec: mujoco.MjSpec) -> None:
@@ -82,6 +87,25 @@ class Task:
         return {}
 
     # -- shared helpers -----------------------------------------------------------------
+    def set_overrides(self, hidden: dict[str, Any] | None) -> None:
+        """Fix hidden variables for the next ``initialize`` (see ``hidden_keys``)."""
+        hidden = dict(hidden or {})
+        unknown = sorted(set(hidden) - set(self.hidden_keys))
+        if unknown:
+            raise ValueError(f"{self.name} cannot fix hidden variable(s) {unknown}; "
+                             f"it has {list(self.hidden_keys)}")
+        self.overrides = hidden
+
+    def choose(self, key: str, drawn, allowed=None):
+        """``drawn`` (already taken from the episode's generator, so later draws do not
+        shift), unless the caller fixed ``key``; a fixed value must be one of ``allowed``."""
+        if key not in self.overrides:
+            return drawn
+        value = self.overrides[key]
+        if allowed is not None and value not in allowed:
+            raise ValueError(f"{self.name}: hidden {key}={value!r} is not one of {list(allowed)}")
+        return value
+
     def begin_episode(self) -> None:
         self._stage = 0
         self._best_progress = 0.0

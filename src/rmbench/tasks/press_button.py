@@ -52,6 +52,7 @@ class PressButton(Task):
     )
     aliasing_point = "between presses: a released button looks the same after any count"
     aliasing_stage = 1  # after the first press
+    hidden_keys = ("d1", "d2")
 
     def __init__(self):
         super().__init__()
@@ -77,8 +78,10 @@ class PressButton(Task):
 
     def initialize(self, rng: np.random.Generator) -> None:
         self.begin_episode()
-        self.d1 = int(rng.integers(1, 10))
-        self.d2 = int(rng.integers(1, 11 - self.d1))
+        d1 = int(rng.integers(1, 10))
+        d2 = int(rng.integers(1, 11 - d1))
+        self.d1 = self.choose("d1", d1, range(1, 10))
+        self.d2 = self.choose("d2", min(d2, 10 - self.d1), range(1, 11 - self.d1))
         y = rng.uniform(-0.16, -0.12)
         xl = rng.uniform(-0.30, -0.24)
         xm = xl + rng.uniform(0.13, 0.16)

@@ -52,6 +52,7 @@ class PutBackBlock(Task):
     )
     aliasing_point = "cube at the centre, around the press: the four mats look identical"
     aliasing_stage = 2  # the press has happened; the cube still sits at the centre
+    hidden_keys = ("original_mat",)
 
     def __init__(self):
         super().__init__()
@@ -80,7 +81,7 @@ class PutBackBlock(Task):
         d = rng.uniform(0.10, 0.13)
         for n, mat in self.mats.items():
             mat.move(self.model, self.centre + d * np.asarray(MAT_DIRECTIONS[n]))
-        self.original = MAT_NAMES[int(rng.integers(4))]
+        self.original = self.choose("original_mat", MAT_NAMES[int(rng.integers(4))], MAT_NAMES)
         self.button.move(self.model, (rng.uniform(-0.38, -0.30), rng.uniform(-0.22, -0.12)))
         self.button.reset()
         self.cube.place(self.data, self.mats[self.original].xy(self.model),

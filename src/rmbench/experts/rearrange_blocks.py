@@ -1,0 +1,29 @@
+"""Expert for rearrange_blocks: middle block to the empty mat, press, the originally
+mat-borne block to the middle; each block moved by the arm nearer to it."""
+
+from __future__ import annotations
+
+from rmbench.experts.base import ScriptedExpert, register_expert
+from rmbench.experts.motion import nearer_side
+from rmbench.sim.station import TABLE_TOP
+
+
+@register_expert
+class RearrangeBlocksExpert(ScriptedExpert):
+    task = "rearrange_blocks"
+
+    def plan(self, task):
+        m, data = self.motion, task.data
+        returning, middle = task.cubes
+
+        def move(cube, dest_xy):
+            pos = cube.pos(data)
+            side = nearer_side(pos)
+            yield from m.transfer(side, pos, cube.yaw(data), cube.size, (*dest_xy, TABLE_TOP))
+            yield from m.go_home(side)
+
+        yield from self.label(0, move(middle, task.mat_slot(task.empty)))
+        yield from self.label(1, m.press("left", task.button.top(task.model)))
+        yield from self.label(1, m.go_home("left"))
+        yield from self.label(2, move(returning, task.slots[1]))
+        yield from self.label(2, m.hold(5))
