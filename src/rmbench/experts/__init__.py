@@ -4,6 +4,7 @@ from rmbench.experts import (  # noqa: F401  (registers)
     press_button,
     put_back_block,
     rearrange_blocks,
+    swap_blocks,
 )
 from rmbench.experts.base import EXPERTS, ScriptedExpert, make_expert
 

@@ -30,10 +30,11 @@ class ScriptedExpert:
     def __init__(self, env):
         self.env = env.unwrapped
         self.ik = ArmIK()
-        self._plan: Iterator[tuple[np.ndarray, int]] | None = None
+        self._plan: Iterator[tuple[np.ndarray, int, bool]] | None = None
         self._last: np.ndarray | None = None
         self.subtask_index = 0
         self.subtask = ""
+        self.segment_start = False  # this action begins a new labelled segment of the plan
         self.finished = False
 
     def reset(self, instruction: str = "", task_info: dict[str, Any] | None = None) -> None:
@@ -46,20 +47,24 @@ class ScriptedExpert:
         if self._plan is None:
             raise RuntimeError("call reset() before act()")
         try:
-            action, self.subtask_index = next(self._plan)
+            action, self.subtask_index, self.segment_start = next(self._plan)
             self._last = action
         except StopIteration:
             self.finished = True  # plan done: hold still while the task registers the end
+            self.segment_start = False
         self.subtask = type(self.env.task).subtasks[self.subtask_index]
         return self._last.copy()
 
-    def plan(self, task: Task) -> Iterator[tuple[np.ndarray, int]]:
+    def plan(self, task: Task) -> Iterator[tuple[np.ndarray, int, bool]]:
+        """(action, subtask index, starts a segment) triples; build it from ``label``."""
         raise NotImplementedError
 
     @staticmethod
-    def label(subtask: int, actions: Actions) -> Iterator[tuple[np.ndarray, int]]:
-        for a in actions:
-            yield a, subtask
+    def label(subtask: int, actions: Actions) -> Iterator[tuple[np.ndarray, int, bool]]:
+        """Tag a segment of the plan with its subtask. Segment starts are the expert's quiet
+        moments between moves (the aliasing tests compare frames there)."""
+        for k, a in enumerate(actions):
+            yield a, subtask, k == 0
 
 
 def make_expert(env) -> ScriptedExpert:

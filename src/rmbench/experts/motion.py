@@ -114,36 +114,37 @@ class Motion:
     def move_by(self, side: str, delta, yaw: float, speed: float = CARRY_SPEED) -> Actions:
         yield from self.move_to(side, self.site_pos(side) + np.asarray(delta), yaw, speed)
 
-    def grasp(self, side: str, centre, yaw: float, height: float) -> Actions:
-        """Open, come down over ``centre`` (the object's centre, ``height`` tall), close, lift."""
+    def grasp(self, side: str, centre, yaw: float, height: float, opening: float = OPEN) -> Actions:
+        """Open (to ``opening``, less inside trays), come down over ``centre`` (the object's
+        centre, ``height`` tall), close, lift."""
         centre = np.asarray(centre, float)
         grip_z = centre[2] - height / 2 + FINGER_TIP_BELOW_SITE + 0.010
         grip = np.array([centre[0], centre[1], max(grip_z, centre[2] - 0.01)])
-        yield from self.gripper(side, OPEN, 4)
+        yield from self.gripper(side, opening, 4)
         yield from self.approach(side, grip + (0, 0, HOVER), yaw)
         yield from self.move_to(side, grip, yaw, FINE_SPEED)
         yield from self.gripper(side, CLOSED, 8)
         yield from self.hold(3)
         yield from self.move_to(side, grip + (0, 0, HOVER), yaw, FINE_SPEED)
 
-    def place(self, side: str, target, yaw: float, height: float) -> Actions:
-        """Carry the held object over ``target`` (table xy, z of the surface), set it down, open,
-        and rise."""
+    def place(self, side: str, target, yaw: float, height: float, opening: float = OPEN) -> Actions:
+        """Carry the held object over ``target`` (table xy, z of the surface), set it down, open
+        (to ``opening``), and rise."""
         target = np.asarray(target, float)
         release = np.array([target[0], target[1],
                             target[2] + FINGER_TIP_BELOW_SITE + 0.010 + 0.004])
         yield from self.move_to(side, release + (0, 0, HOVER), yaw)
         yield from self.move_to(side, release, yaw, FINE_SPEED)
-        yield from self.gripper(side, OPEN, 6)
+        yield from self.gripper(side, opening, 6)
         yield from self.move_to(side, release + (0, 0, HOVER), yaw, FINE_SPEED)
 
     def transfer(self, side: str, pos, object_yaw: float, height: float, dest,
-                 symmetry: float = np.pi / 2, turn: float = 0.0) -> Actions:
+                 symmetry: float = np.pi / 2, turn: float = 0.0, opening: float = OPEN) -> Actions:
         """Pick the object at ``pos`` (centre) and set it down at ``dest`` (table xy and surface
         z), turned by ``turn`` about z."""
         yaw = grasp_yaw(side, pos[:2], object_yaw, symmetry)
-        yield from self.grasp(side, pos, yaw, height)
-        yield from self.place(side, dest, yaw + turn, height)
+        yield from self.grasp(side, pos, yaw, height, opening)
+        yield from self.place(side, dest, yaw + turn, height, opening)
 
     def press(self, side: str, top, depth: float = 0.012, approach: bool = True) -> Actions:
         """Push down on the point ``top`` with closed fingers, and come up. ``depth`` is the commanded

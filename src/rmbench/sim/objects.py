@@ -114,6 +114,31 @@ class Mat(StaticPiece):
 
 
 @dataclass
+class Tray(StaticPiece):
+    """A square tray: a visual floor and four low walls that collide. Identical trays alias
+    the same way identical mats do; the walls keep a dropped cube from sliding out."""
+
+    inner: float = 0.11
+    wall: float = 0.006
+    wall_height: float = 0.012
+    rgba: tuple = (0.55, 0.55, 0.6, 1.0)
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        body = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP])
+        half = self.inner / 2
+        body.add_geom(name=f"{self.name}/floor", type=BOX, size=[half, half, 0.001],
+                      pos=[0, 0, 0.001], rgba=list(self.rgba), contype=0, conaffinity=0)
+        long, t, h = half + self.wall, self.wall / 2, self.wall_height / 2
+        for k, (x, y, sx, sy) in enumerate(((half + t, 0, t, long), (-half - t, 0, t, long),
+                                            (0, half + t, long, t), (0, -half - t, long, t))):
+            body.add_geom(name=f"{self.name}/wall{k}", type=BOX, size=[sx, sy, h],
+                          pos=[x, y, h], rgba=list(self.rgba))
+
+    def contains(self, model: mujoco.MjModel, xy) -> bool:
+        return bool(np.all(np.abs(np.asarray(xy)[:2] - self.xy(model)) <= self.inner / 2))
+
+
+@dataclass
 class Button(StaticPiece):
     """A spring-loaded push button with press counting.
 

@@ -4,6 +4,7 @@ from rmbench.tasks import (  # noqa: F401  (registers)
     press_button,
     put_back_block,
     rearrange_blocks,
+    swap_blocks,
 )
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import TASKS, UnknownTaskError, get_task

@@ -1,0 +1,36 @@
+"""Expert for swap_blocks: three moves through the empty tray, each by the arm nearer the
+cube, then a press."""
+
+from __future__ import annotations
+
+from rmbench.experts.base import ScriptedExpert, register_expert
+from rmbench.experts.motion import nearer_side
+from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks.swap_blocks import roles
+
+TRAY_OPENING = 0.6  # fingers half open: a full opening would land on the tray walls
+
+
+@register_expert
+class SwapBlocksExpert(ScriptedExpert):
+    task = "swap_blocks"
+
+    def plan(self, task):
+        m, data, model = self.motion, task.data, task.model
+        first_cube, second_cube = task.cubes
+        first, second = roles(task.empty)
+
+        def move(cube, tray):
+            pos = cube.pos(data)
+            side = nearer_side(pos)
+            yield from m.transfer(side, pos, cube.yaw(data), cube.size,
+                                  (*task.trays[tray].xy(model), TABLE_TOP), opening=TRAY_OPENING)
+            yield from m.go_home(side)
+
+        yield from self.label(0, move(first_cube, task.empty))
+        yield from self.label(1, move(second_cube, first))
+        yield from self.label(2, move(first_cube, second))
+        top = task.button.top(model)
+        side = nearer_side(top)
+        yield from self.label(3, m.press(side, top))
+        yield from self.label(3, m.go_home(side))

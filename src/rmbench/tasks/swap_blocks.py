@@ -1,0 +1,169 @@
+"""swap_blocks — M(1).
+
+Task: three identical trays in a row hold two identical cubes; one tray is empty. Swap the
+cubes through the empty tray — the first cube (the one nearer the empty tray, the left one
+on a tie) to the empty tray, the second cube into the first one's tray, the first cube into
+the second one's tray — then press the button.
+
+Randomization: tray row centre x ~ U[-0.02, 0.02], y ~ U[-0.09, -0.05], trays 0.14 m apart;
+the empty tray uniformly of the three; each cube jittered by up to 8 mm in its tray with yaw
+~ U[-0.2, 0.2]; button x ~ U[-0.05, 0.05], y ~ U[-0.24, -0.20] (the benchmark's y = -0.28,
+brought 4-8 cm nearer the trays so the arms press it from above).
+
+Success: each cube rests in the tray where the other started, the cubes were never stacked,
+then exactly one press, no finger touching a cube.
+Failure: a press before the swap is complete; a second press; one cube resting on the
+other; a cube off the table.
+
+Memory: TMC M(1). Aliasing point: mid-sequence the table again shows two full trays and an
+empty one, as at the start of some other episode; only the past tells which move comes next
+and where each cube started.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rmbench.sim.objects import Button, Cube, Tray
+from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.registry import register
+
+TRAY_SPACING = 0.14
+CUBE_RGBA = (0.95, 0.55, 0.1, 1.0)
+
+
+def roles(empty: int) -> tuple[int, int]:
+    """(tray of the first cube, tray of the second) for a given empty tray: the first cube is
+    the one nearer the empty tray, the left one on a tie."""
+    first = {0: 1, 1: 0, 2: 1}[empty]
+    return first, 3 - empty - first
+
+
+@register
+class SwapBlocks(Task):
+    name = "swap_blocks"
+    gym_id = "rmbench/SwapBlocks-v0"
+    tmc = "M(1)"
+    step_limit = 1000
+    subtasks = ("move the first block to the empty tray",
+                "move the second block into the first block's tray",
+                "move the first block into the second block's tray",
+                "press the button")
+    instructions_seen = (
+        "Swap the two blocks using the empty tray, then press the button.",
+        "Exchange the positions of the two cubes through the free tray and press the button.",
+        "Use the empty tray to swap the blocks' trays, then push the button once.",
+        "Make the two blocks trade trays with the help of the empty one, and finish by "
+        "pressing the button.",
+    )
+    instructions_unseen = (
+        "Switch the cubes between their trays via the spare tray, then hit the button.",
+        "Have each block end up where the other one started, using the empty tray, and press "
+        "the button.",
+    )
+    aliasing_point = "after any move: two full trays and an empty one, like a fresh start"
+    aliasing_stage = 2
+    hidden_keys = ("empty_tray",)
+
+    def __init__(self):
+        super().__init__()
+        self.trays = tuple(Tray(f"tray{k}") for k in range(3))
+        self.cubes = (Cube("cube_first", size=0.03, rgba=CUBE_RGBA),
+                      Cube("cube_second", size=0.03, rgba=CUBE_RGBA))
+        self.button = Button("button")
+        self.empty = 2
+        self.stacked = False
+        self.early_press = False
+        self.swapped_at_press = False
+
+    @property
+    def pieces(self):
+        return (*self.trays, self.button, *self.cubes)
+
+    def build(self, spec) -> None:
+        for piece in self.pieces:
+            piece.build(spec)
+
+    def bind(self, model, data) -> None:
+        super().bind(model, data)
+        for piece in self.pieces:
+            piece.bind(model)
+
+    def initialize(self, rng: np.random.Generator) -> None:
+        self.begin_episode()
+        xc, y = rng.uniform(-0.02, 0.02), rng.uniform(-0.09, -0.05)
+        for k, tray in enumerate(self.trays):
+            tray.move(self.model, (xc + (k - 1) * TRAY_SPACING, y))
+        self.empty = self.choose("empty_tray", int(rng.integers(3)), range(3))
+        for cube, tray in zip(self.cubes, roles(self.empty), strict=True):
+            jitter = rng.uniform(-0.008, 0.008, 2)
+            cube.place(self.data, self.trays[tray].xy(self.model) + jitter,
+                       yaw=rng.uniform(-0.2, 0.2))
+        self.button.move(self.model, (rng.uniform(-0.05, 0.05), rng.uniform(-0.24, -0.20)))
+        self.button.reset()
+        self.stacked = self.early_press = self.swapped_at_press = False
+
+    def plan(self) -> list[int]:
+        return [0, 1, 2, 3]
+
+    def hidden_state(self) -> dict:
+        first, second = roles(self.empty)
+        return {"empty_tray": self.empty, "first_tray": first, "second_tray": second}
+
+    def tray_of(self, cube: Cube) -> int | None:
+        """The tray a cube rests in, released; None while carried or outside every tray."""
+        if not cube.resting(self.data) or self.touched_by_fingers(cube.body_id):
+            return None
+        xy = cube.pos(self.data)[:2]
+        return next((k for k, t in enumerate(self.trays) if t.contains(self.model, xy)), None)
+
+    def swapped(self) -> bool:
+        first, second = roles(self.empty)
+        return (self.tray_of(self.cubes[0]), self.tray_of(self.cubes[1])) == (second, first)
+
+    def on_substep(self) -> None:
+        self.button.update(self.data)
+        if self.button.just_pressed:
+            self.button.just_pressed = False
+            if self.button.count == 1 and self.swapped():
+                self.swapped_at_press = True
+            else:
+                self.early_press = True
+
+    def _on_top(self) -> bool:
+        """One cube resting on the other (the cubes were stacked)."""
+        (pa, pb), size = (c.pos(self.data) for c in self.cubes), self.cubes[0].size
+        upper, lower = (pa, pb) if pa[2] > pb[2] else (pb, pa)
+        held = any(self.touched_by_fingers(c.body_id) for c in self.cubes)
+        return (not held and upper[2] - lower[2] > 0.7 * size
+                and np.linalg.norm(upper[:2] - lower[:2]) < size)
+
+    def evaluate(self) -> Evaluation:
+        first, second = roles(self.empty)
+        where = (self.tray_of(self.cubes[0]), self.tray_of(self.cubes[1]))
+        self.stacked = self.stacked or self._on_top()
+        presses = self.button.count
+        preds = {"first_cube_tray": -1 if where[0] is None else where[0],
+                 "second_cube_tray": -1 if where[1] is None else where[1],
+                 "presses": presses, "stacked": self.stacked, "empty_tray": self.empty}
+        reason = ""
+        if self.stacked:
+            reason = "the cubes were stacked"
+        elif presses > 1:
+            reason = "button pressed more than once"
+        elif self.early_press:
+            reason = "button pressed before the swap was complete"
+        elif min(c.pos(self.data)[2] for c in self.cubes) < TABLE_TOP - 0.05:
+            reason = "a cube fell off the table"
+        stage = 0
+        for s, target in ((1, (self.empty, second)), (2, (self.empty, first)),
+                          (3, (second, first))):
+            if where == target and self._stage >= s - 1:
+                stage = s
+        if self.swapped_at_press:
+            stage = 4
+        stage, progress = self.advance(stage, stage / 4)
+        return Evaluation(success=stage == 4 and not reason, failure=bool(reason),
+                          progress=progress, stage=stage, failure_reason=reason,
+                          predicates=preds)
