@@ -1,6 +1,7 @@
 """Scripted experts, one per task, on shared motion primitives."""
 
 from rmbench.experts import (  # noqa: F401  (registers)
+    blocks_ranking_try,
     press_button,
     put_back_block,
     rearrange_blocks,

@@ -56,6 +56,13 @@ class Motion:
     def __init__(self, ik: ArmIK):
         self.ik = ik
         self.cmd = home_action()
+        self.away: set[str] = set()  # arms out of their home pose
+
+    def clear_for(self, side: str) -> Actions:
+        """Send the other arm home first if it is out: the arms never work side by side."""
+        other = "right" if side == "left" else "left"
+        if other in self.away:
+            yield from self.go_home(other)
 
     @staticmethod
     def _slice(side: str) -> slice:
@@ -78,11 +85,14 @@ class Motion:
 
     def gripper(self, side: str, value: float, steps: int = 6) -> Actions:
         start = self.cmd[self._grip(side)]
+        if start == value:
+            return
         for s in min_jerk(steps):
             self.cmd[self._grip(side)] = start + (value - start) * s
             yield self.cmd.copy()
 
     def move_joints(self, side: str, target: np.ndarray, speed: float = JOINT_SPEED) -> Actions:
+        self.away.add(side)
         start = self.joints(side)
         n = max(int(np.ceil(np.abs(target - start).max() / (speed * DT) * 1.5)), 2)
         for s in min_jerk(n):
@@ -91,6 +101,7 @@ class Motion:
 
     def move_to(self, side: str, pos, yaw: float, speed: float = CARRY_SPEED) -> Actions:
         """Straight line of the grasp site to ``pos`` with the gripper pointing down."""
+        self.away.add(side)
         start = self.site_pos(side)
         pos = np.asarray(pos, float)
         n = max(int(np.ceil(np.linalg.norm(pos - start) / (speed * DT) * 1.5)), 2)
@@ -110,6 +121,7 @@ class Motion:
 
     def go_home(self, side: str) -> Actions:
         yield from self.move_joints(side, np.array(HOME_ARM[side]))
+        self.away.discard(side)
 
     def move_by(self, side: str, delta, yaw: float, speed: float = CARRY_SPEED) -> Actions:
         yield from self.move_to(side, self.site_pos(side) + np.asarray(delta), yaw, speed)
@@ -153,8 +165,8 @@ class Motion:
         yaw = natural_yaw(side, top)
         above = top + (0, 0, FINGER_TIP_BELOW_SITE + 0.04)
         down = top + (0, 0, FINGER_TIP_BELOW_SITE - depth)
+        yield from self.gripper(side, CLOSED, 4)
         if approach:
-            yield from self.gripper(side, CLOSED, 4)
             yield from self.approach(side, above, yaw)
         else:
             yield from self.move_to(side, above, yaw)

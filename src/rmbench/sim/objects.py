@@ -40,6 +40,7 @@ class Cube:
     rgba: tuple = RED
     mass: float = 0.05
     body_id: int = -1
+    geom_id: int = -1
     qpos_adr: int = -1
     qvel_adr: int = -1
 
@@ -54,6 +55,7 @@ class Cube:
     def bind(self, model: mujoco.MjModel) -> None:
         joint = model.joint(f"{self.name}/free")
         self.body_id = model.body(self.name).id
+        self.geom_id = model.geom(f"{self.name}/geom").id
         self.qpos_adr = int(joint.qposadr[0])
         self.qvel_adr = int(joint.dofadr[0])
 
@@ -65,6 +67,10 @@ class Cube:
 
     def pos(self, data: mujoco.MjData) -> np.ndarray:
         return data.xpos[self.body_id].copy()
+
+    def paint(self, model: mujoco.MjModel, rgba) -> None:
+        """Recolour per episode (one compiled model serves every colour draw)."""
+        model.geom_rgba[self.geom_id] = rgba
 
     def yaw(self, data: mujoco.MjData) -> float:
         mat = data.xmat[self.body_id].reshape(3, 3)
@@ -136,6 +142,38 @@ class Tray(StaticPiece):
 
     def contains(self, model: mujoco.MjModel, xy) -> bool:
         return bool(np.all(np.abs(np.asarray(xy)[:2] - self.xy(model)) <= self.inner / 2))
+
+
+LAMP_COLOURS = {"off": (0.3, 0.3, 0.3, 1.0), "red": (1.0, 0.1, 0.1, 1.0),
+                "green": (0.1, 1.0, 0.2, 1.0)}
+
+
+@dataclass
+class Lamp(StaticPiece):
+    """An indicator light on a small post: off, red or green. Tasks use it to reveal a verdict
+    (the battery holder's light, the ranking button's answer) that the policy must remember."""
+
+    radius: float = 0.014
+    height: float = 0.03
+    state: str = "off"
+    geom_id: int = -1
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        body = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP])
+        body.add_geom(name=f"{self.name}/post", type=CYLINDER, size=[0.006, self.height / 2],
+                      pos=[0, 0, self.height / 2], rgba=[0.2, 0.2, 0.22, 1],
+                      contype=0, conaffinity=0)
+        body.add_geom(name=f"{self.name}/bulb", type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                      size=[self.radius, 0, 0], pos=[0, 0, self.height + self.radius * 0.6],
+                      rgba=list(LAMP_COLOURS["off"]), contype=0, conaffinity=0)
+
+    def bind(self, model: mujoco.MjModel) -> None:
+        super().bind(model)
+        self.geom_id = model.geom(f"{self.name}/bulb").id
+
+    def set(self, model: mujoco.MjModel, state: str) -> None:
+        self.state = state
+        model.geom_rgba[self.geom_id] = LAMP_COLOURS[state]
 
 
 @dataclass

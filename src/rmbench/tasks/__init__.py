@@ -1,6 +1,7 @@
 """Tasks: one file per task, registered by name and gym id."""
 
 from rmbench.tasks import (  # noqa: F401  (registers)
+    blocks_ranking_try,
     press_button,
     put_back_block,
     rearrange_blocks,

@@ -15,6 +15,8 @@ from typing import Any, ClassVar
 import mujoco
 import numpy as np
 
+from rmbench.sim.station import TABLE_TOP
+
 
 @dataclass(frozen=True)
 class Evaluation:
@@ -115,6 +117,21 @@ class Task:
         self._stage = max(self._stage, stage)
         self._best_progress = max(self._best_progress, progress)
         return self._stage, self._best_progress
+
+    def stacked(self, cubes) -> bool:
+        """Some cube rests, released, on top of another (stacking is a failure where cubes
+        must stay on the table)."""
+        for upper in cubes:
+            p = upper.pos(self.data)
+            speed = np.linalg.norm(self.data.qvel[upper.qvel_adr: upper.qvel_adr + 3])
+            if p[2] - upper.size / 2 < TABLE_TOP + 0.6 * upper.size or speed > 0.05:
+                continue
+            if self.touched_by_fingers(upper.body_id):
+                continue
+            if any(np.linalg.norm(p[:2] - c.pos(self.data)[:2]) < c.size for c in cubes
+                   if c is not upper):
+                return True
+        return False
 
     def touched_by_fingers(self, body_id: int) -> bool:
         """Whether any gripper finger is in contact with ``body_id``."""

@@ -73,7 +73,7 @@ class SwapBlocks(Task):
                       Cube("cube_second", size=0.03, rgba=CUBE_RGBA))
         self.button = Button("button")
         self.empty = 2
-        self.stacked = False
+        self.is_stacked = False
         self.early_press = False
         self.swapped_at_press = False
 
@@ -102,7 +102,7 @@ class SwapBlocks(Task):
                        yaw=rng.uniform(-0.2, 0.2))
         self.button.move(self.model, (rng.uniform(-0.05, 0.05), rng.uniform(-0.24, -0.20)))
         self.button.reset()
-        self.stacked = self.early_press = self.swapped_at_press = False
+        self.is_stacked = self.early_press = self.swapped_at_press = False
 
     def plan(self) -> list[int]:
         return [0, 1, 2, 3]
@@ -131,24 +131,16 @@ class SwapBlocks(Task):
             else:
                 self.early_press = True
 
-    def _on_top(self) -> bool:
-        """One cube resting on the other (the cubes were stacked)."""
-        (pa, pb), size = (c.pos(self.data) for c in self.cubes), self.cubes[0].size
-        upper, lower = (pa, pb) if pa[2] > pb[2] else (pb, pa)
-        held = any(self.touched_by_fingers(c.body_id) for c in self.cubes)
-        return (not held and upper[2] - lower[2] > 0.7 * size
-                and np.linalg.norm(upper[:2] - lower[:2]) < size)
-
     def evaluate(self) -> Evaluation:
         first, second = roles(self.empty)
         where = (self.tray_of(self.cubes[0]), self.tray_of(self.cubes[1]))
-        self.stacked = self.stacked or self._on_top()
+        self.is_stacked = self.is_stacked or self.stacked(self.cubes)
         presses = self.button.count
         preds = {"first_cube_tray": -1 if where[0] is None else where[0],
                  "second_cube_tray": -1 if where[1] is None else where[1],
-                 "presses": presses, "stacked": self.stacked, "empty_tray": self.empty}
+                 "presses": presses, "stacked": self.is_stacked, "empty_tray": self.empty}
         reason = ""
-        if self.stacked:
+        if self.is_stacked:
             reason = "the cubes were stacked"
         elif presses > 1:
             reason = "button pressed more than once"
