@@ -123,6 +123,11 @@ class Motion:
         yield from self.move_joints(side, np.array(HOME_ARM[side]))
         self.away.discard(side)
 
+    def retreat(self) -> Actions:
+        """Every arm that is out goes home."""
+        for side in sorted(self.away):
+            yield from self.go_home(side)
+
     def move_by(self, side: str, delta, yaw: float, speed: float = CARRY_SPEED) -> Actions:
         yield from self.move_to(side, self.site_pos(side) + np.asarray(delta), yaw, speed)
 

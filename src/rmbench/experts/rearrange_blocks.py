@@ -19,11 +19,14 @@ class RearrangeBlocksExpert(ScriptedExpert):
         def move(cube, dest_xy):
             pos = cube.pos(data)
             side = nearer_side(pos)
+            yield from m.clear_for(side)
             yield from m.transfer(side, pos, cube.yaw(data), cube.size, (*dest_xy, TABLE_TOP))
-            yield from m.go_home(side)
 
+        # Retreats belong to the subtask they make room for; each is its own segment, so the
+        # next segment starts with the arms at home.
         yield from self.label(0, move(middle, task.mat_slot(task.empty)))
+        yield from self.label(1, m.retreat())
         yield from self.label(1, m.press("left", task.button.top(task.model)))
-        yield from self.label(1, m.go_home("left"))
+        yield from self.label(2, m.go_home("left"))
         yield from self.label(2, move(returning, task.slots[1]))
         yield from self.label(2, m.hold(5))

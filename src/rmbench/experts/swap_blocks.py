@@ -25,11 +25,13 @@ class SwapBlocksExpert(ScriptedExpert):
             side = nearer_side(pos)
             yield from m.transfer(side, pos, cube.yaw(data), cube.size,
                                   (*task.trays[tray].xy(model), TABLE_TOP), opening=TRAY_OPENING)
-            yield from m.go_home(side)
 
-        yield from self.label(0, move(first_cube, task.empty))
-        yield from self.label(1, move(second_cube, first))
-        yield from self.label(2, move(first_cube, second))
+        # Each retreat is labelled with the subtask it makes room for and is its own segment,
+        # so every move starts with both arms at home, as at the start of an episode.
+        moves = ((first_cube, task.empty), (second_cube, first), (first_cube, second))
+        for k, (cube, tray) in enumerate(moves):
+            yield from self.label(k, move(cube, tray))
+            yield from self.label(k + 1, m.retreat())
         top = task.button.top(model)
         side = nearer_side(top)
         yield from self.label(3, m.press(side, top))

@@ -32,25 +32,29 @@ def _explicit_inertia(body, mass: float, half_sizes) -> None:
 
 
 @dataclass
-class Cube:
-    """A free cube of edge ``size`` (metres)."""
+class FreePiece:
+    """A free-floating object. Subclasses add geoms in ``_geoms`` and say how high the body
+    origin sits above the table when the object rests (``rest_height``)."""
 
     name: str
-    size: float = 0.04
     rgba: tuple = RED
     mass: float = 0.05
     body_id: int = -1
-    geom_id: int = -1
+    geom_id: int = -1  # the main (painted) geom
     qpos_adr: int = -1
     qvel_adr: int = -1
 
+    @property
+    def rest_height(self) -> float:
+        raise NotImplementedError
+
+    def _geoms(self, body) -> None:
+        raise NotImplementedError
+
     def build(self, spec: mujoco.MjSpec) -> None:
-        h = self.size / 2
-        body = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP + h])
+        body = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP + self.rest_height])
         body.add_freejoint(name=f"{self.name}/free")
-        body.add_geom(name=f"{self.name}/geom", type=BOX, size=[h, h, h], rgba=list(self.rgba),
-                      friction=[1.0, 0.005, 0.0001], condim=4)
-        _explicit_inertia(body, self.mass, [h, h, h])
+        self._geoms(body)
 
     def bind(self, model: mujoco.MjModel) -> None:
         joint = model.joint(f"{self.name}/free")
@@ -60,7 +64,7 @@ class Cube:
         self.qvel_adr = int(joint.dofadr[0])
 
     def place(self, data: mujoco.MjData, xy, yaw: float = 0.0, z: float | None = None) -> None:
-        z = TABLE_TOP + self.size / 2 if z is None else z
+        z = TABLE_TOP + self.rest_height if z is None else z
         data.qpos[self.qpos_adr: self.qpos_adr + 3] = (xy[0], xy[1], z)
         data.qpos[self.qpos_adr + 3: self.qpos_adr + 7] = (np.cos(yaw / 2), 0, 0, np.sin(yaw / 2))
         data.qvel[self.qvel_adr: self.qvel_adr + 6] = 0.0
@@ -76,10 +80,82 @@ class Cube:
         mat = data.xmat[self.body_id].reshape(3, 3)
         return float(np.arctan2(mat[1, 0], mat[0, 0]))
 
+    def upright(self, data: mujoco.MjData, tol: float = 0.1) -> bool:
+        return bool(data.xmat[self.body_id][8] > np.cos(tol))
+
+    def speed(self, data: mujoco.MjData) -> float:
+        return float(np.linalg.norm(data.qvel[self.qvel_adr: self.qvel_adr + 3]))
+
     def resting(self, data: mujoco.MjData, tol: float = 0.005) -> bool:
         """On the table (or a mat), not moving."""
-        speed = np.linalg.norm(data.qvel[self.qvel_adr: self.qvel_adr + 3])
-        return abs(self.pos(data)[2] - (TABLE_TOP + self.size / 2)) < tol and speed < 0.02
+        return (abs(self.pos(data)[2] - (TABLE_TOP + self.rest_height)) < tol
+                and self.speed(data) < 0.02)
+
+
+@dataclass
+class Cube(FreePiece):
+    """A free cube of edge ``size`` (metres)."""
+
+    size: float = 0.04
+
+    @property
+    def rest_height(self) -> float:
+        return self.size / 2
+
+    def _geoms(self, body) -> None:
+        h = self.size / 2
+        body.add_geom(name=f"{self.name}/geom", type=BOX, size=[h, h, h], rgba=list(self.rgba),
+                      friction=[1.0, 0.005, 0.0001], condim=4)
+        _explicit_inertia(body, self.mass, [h, h, h])
+
+
+@dataclass
+class Cover(FreePiece):
+    """An upside-down square cup with a knob on top, to hide a cube from the cameras.
+
+    The body origin is the centre of the open bottom; the gripper takes the knob.
+    """
+
+    inner: float = 0.064
+    wall: float = 0.004
+    height: float = 0.062
+    knob: float = 0.022  # knob edge (square) and height
+    rgba: tuple = (0.8, 0.8, 0.78, 1.0)
+    mass: float = 0.06
+
+    @property
+    def rest_height(self) -> float:
+        return 0.0
+
+    def knob_centre(self, data: mujoco.MjData) -> np.ndarray:
+        return self.pos(data) + (0, 0, self.height + self.knob / 2)
+
+    @property
+    def knob_base(self) -> float:
+        """Height of the knob's bottom above the cover's bottom (for placing by the knob)."""
+        return self.height
+
+    def _geoms(self, body) -> None:
+        half, t, h = self.inner / 2, self.wall / 2, self.height / 2
+        rgba = list(self.rgba)
+        body.add_geom(name=f"{self.name}/geom", type=BOX, size=[half + self.wall, half + self.wall, t],
+                      pos=[0, 0, self.height - t], rgba=rgba)
+        for k, (x, y, sx, sy) in enumerate(((half + t, 0, t, half), (-half - t, 0, t, half),
+                                            (0, half + t, half + self.wall, t),
+                                            (0, -half - t, half + self.wall, t))):
+            body.add_geom(name=f"{self.name}/wall{k}", type=BOX, size=[sx, sy, h - t],
+                          pos=[x, y, h - t], rgba=rgba)
+        body.add_geom(name=f"{self.name}/knob", type=BOX, size=[self.knob / 2] * 3,
+                      pos=[0, 0, self.height + self.knob / 2], rgba=[0.35, 0.35, 0.38, 1],
+                      friction=[1.0, 0.005, 0.0001], condim=4)
+        # Mass spread like a shell: centre of mass at mid-height.
+        body.explicitinertial = True
+        body.mass = self.mass
+        r = half + self.wall
+        body.inertia = [self.mass * (r**2 + h**2) / 3, self.mass * (r**2 + h**2) / 3,
+                        self.mass * 2 * r**2 / 3]
+        body.ipos = [0, 0, h]
+        body.iquat = [1, 0, 0, 0]
 
 
 @dataclass
