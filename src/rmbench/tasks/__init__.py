@@ -2,6 +2,7 @@
 
 from rmbench.tasks import (  # noqa: F401  (registers)
     blocks_ranking_try,
+    cover_blocks,
     press_button,
     put_back_block,
     rearrange_blocks,
