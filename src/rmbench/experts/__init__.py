@@ -1,6 +1,7 @@
 """Scripted experts, one per task, on shared motion primitives."""
 
 from rmbench.experts import (  # noqa: F401  (registers)
+    battery_try,
     blocks_ranking_try,
     cover_blocks,
     press_button,

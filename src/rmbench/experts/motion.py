@@ -39,9 +39,11 @@ def natural_yaw(side: str, xy) -> float:
     return float(np.arctan2(xy[1] - by, xy[0] - bx) + np.pi / 2)
 
 
-def grasp_yaw(side: str, xy, object_yaw: float, symmetry: float = np.pi / 2) -> float:
-    """Of the object's symmetric grasp yaws, the one closest to the arm's natural yaw."""
-    nat = natural_yaw(side, xy)
+def grasp_yaw(side: str, xy, object_yaw: float, symmetry: float = np.pi / 2,
+              prefer: float | None = None) -> float:
+    """Of the object's symmetric grasp yaws, the one closest to ``prefer`` (default: the arm's
+    natural yaw at ``xy``)."""
+    nat = natural_yaw(side, xy) if prefer is None else prefer
     k = np.round((nat - object_yaw) / symmetry)
     return float(object_yaw + k * symmetry)
 
@@ -78,6 +80,11 @@ class Motion:
     def site_pos(self, side: str) -> np.ndarray:
         return self.ik.forward(side, self.joints(side))[0]
 
+    def gripper_yaw(self, side: str) -> float:
+        """World direction in which the commanded fingers close (see top_down_quat)."""
+        mat = self.ik.forward(side, self.joints(side))[1]
+        return float(np.arctan2(mat[1, 1], mat[0, 1]))
+
     # -------------------------------------------------------------- primitives
     def hold(self, steps: int) -> Actions:
         for _ in range(steps):
@@ -113,8 +120,10 @@ class Motion:
             yield self.cmd.copy()
 
     def approach(self, side: str, pos, yaw: float) -> Actions:
-        """From anywhere (e.g. home) to a top-down pose at ``pos`` through joint space."""
-        q, err = self.ik.solve(side, pos, top_down_quat(yaw))
+        """From anywhere (e.g. home) to a top-down pose at ``pos`` through joint space. An arm
+        already out is solved from where it is, so the wrist does not unwind a turn."""
+        seed = self.joints(side) if side in self.away else None
+        q, err = self.ik.solve(side, pos, top_down_quat(yaw), seed=seed)
         if err > 0.005:
             raise RuntimeError(f"{side} arm cannot reach {np.round(pos, 3)} (IK error {err:.3f} m)")
         yield from self.move_joints(side, q)
@@ -131,37 +140,54 @@ class Motion:
     def move_by(self, side: str, delta, yaw: float, speed: float = CARRY_SPEED) -> Actions:
         yield from self.move_to(side, self.site_pos(side) + np.asarray(delta), yaw, speed)
 
-    def grasp(self, side: str, centre, yaw: float, height: float, opening: float = OPEN) -> Actions:
+    def grasp(self, side: str, centre, yaw: float, height: float, opening: float = OPEN,
+              hover: float = HOVER) -> Actions:
         """Open (to ``opening``, less inside trays), come down over ``centre`` (the object's
         centre, ``height`` tall), close, lift."""
         centre = np.asarray(centre, float)
         grip_z = centre[2] - height / 2 + FINGER_TIP_BELOW_SITE + 0.010
         grip = np.array([centre[0], centre[1], max(grip_z, centre[2] - 0.01)])
         yield from self.gripper(side, opening, 4)
-        yield from self.approach(side, grip + (0, 0, HOVER), yaw)
+        yield from self.approach(side, grip + (0, 0, hover), yaw)
         yield from self.move_to(side, grip, yaw, FINE_SPEED)
         yield from self.gripper(side, CLOSED, 8)
         yield from self.hold(3)
-        yield from self.move_to(side, grip + (0, 0, HOVER), yaw, FINE_SPEED)
+        yield from self.move_to(side, grip + (0, 0, hover), yaw, FINE_SPEED)
 
-    def place(self, side: str, target, yaw: float, height: float, opening: float = OPEN) -> Actions:
+    def place(self, side: str, target, yaw: float, height: float, opening: float = OPEN,
+              hover: float = HOVER) -> Actions:
         """Carry the held object over ``target`` (table xy, z of the surface), set it down, open
         (to ``opening``), and rise."""
         target = np.asarray(target, float)
         release = np.array([target[0], target[1],
                             target[2] + FINGER_TIP_BELOW_SITE + 0.010 + 0.004])
-        yield from self.move_to(side, release + (0, 0, HOVER), yaw)
+        yield from self.move_to(side, release + (0, 0, hover), yaw)
         yield from self.move_to(side, release, yaw, FINE_SPEED)
         yield from self.gripper(side, opening, 6)
-        yield from self.move_to(side, release + (0, 0, HOVER), yaw, FINE_SPEED)
+        yield from self.move_to(side, release + (0, 0, hover), yaw, FINE_SPEED)
 
     def transfer(self, side: str, pos, object_yaw: float, height: float, dest,
-                 symmetry: float = np.pi / 2, turn: float = 0.0, opening: float = OPEN) -> Actions:
+                 symmetry: float = np.pi / 2, turn: float = 0.0, opening: float = OPEN,
+                 hover: float = HOVER) -> Actions:
         """Pick the object at ``pos`` (centre) and set it down at ``dest`` (table xy and surface
         z), turned by ``turn`` about z."""
-        yaw = grasp_yaw(side, pos[:2], object_yaw, symmetry)
-        yield from self.grasp(side, pos, yaw, height, opening)
-        yield from self.place(side, dest, yaw + turn, height, opening)
+        yaw = grasp_yaw(side, pos[:2], object_yaw, symmetry,
+                        self.gripper_yaw(side) if side in self.away else None)
+        yield from self.grasp(side, pos, yaw, height, opening, hover)
+        if abs(turn) > 1e-3:
+            yield from self.twist(side, turn)
+        yield from self.place(side, dest, yaw + turn, height, opening, hover)
+
+    def twist(self, side: str, angle: float, speed: float = 2 * JOINT_SPEED) -> Actions:
+        """Turn the held object about the vertical with the wrist alone (the gripper points
+        down, so the wrist-rotate axis is vertical); the other way round if the joint range
+        requires it."""
+        q = self.joints(side)
+        target = q[5] - angle  # the wrist-rotate axis points down: +joint is -yaw
+        if abs(target) > np.pi:
+            target -= np.sign(target) * 2 * np.pi
+        q[5] = target
+        yield from self.move_joints(side, q, speed)
 
     def press(self, side: str, top, depth: float = 0.012, approach: bool = True) -> Actions:
         """Push down on the point ``top`` with closed fingers, and come up. ``depth`` is the commanded

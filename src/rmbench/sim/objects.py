@@ -159,6 +159,44 @@ class Cover(FreePiece):
 
 
 @dataclass
+class Battery(FreePiece):
+    """A cylinder cell lying on its side along body x, with its positive terminal (a bright
+    nub and end face) at +x. ``yaw`` is the direction the positive end points."""
+
+    radius: float = 0.012
+    length: float = 0.058
+    rgba: tuple = (0.12, 0.12, 0.14, 1.0)
+    terminal_rgba: tuple = (0.95, 0.75, 0.1, 1.0)
+    mass: float = 0.04
+
+    @property
+    def rest_height(self) -> float:
+        return self.radius
+
+    def _geoms(self, body) -> None:
+        along_x = [np.cos(np.pi / 4), 0, np.sin(np.pi / 4), 0]  # cylinder axis z -> x
+        half = self.length / 2
+        # A lying cylinder rolls away from the fingers and squeezes out of a top-down grip;
+        # the cell collides as a square prism (hidden, group 3) and shows as a cylinder.
+        body.add_geom(name=f"{self.name}/geom", type=CYLINDER, size=[self.radius, half],
+                      quat=along_x, rgba=list(self.rgba), contype=0, conaffinity=0)
+        body.add_geom(name=f"{self.name}/collision", type=BOX,
+                      size=[half, self.radius * 0.92, self.radius], group=3,
+                      rgba=[0, 0, 0, 0], friction=[1.0, 0.005, 0.0001], condim=4)
+        body.add_geom(name=f"{self.name}/plus_face", type=CYLINDER,
+                      size=[self.radius * 0.95, 0.001], pos=[half, 0, 0], quat=along_x,
+                      rgba=list(self.terminal_rgba), contype=0, conaffinity=0)
+        body.add_geom(name=f"{self.name}/nub", type=CYLINDER, size=[0.004, 0.0015],
+                      pos=[half + 0.0015, 0, 0], quat=along_x, rgba=list(self.terminal_rgba),
+                      contype=0, conaffinity=0)
+        _explicit_inertia(body, self.mass, [half, self.radius, self.radius])
+
+    def axis(self, data: mujoco.MjData) -> np.ndarray:
+        """World direction of the positive end."""
+        return data.xmat[self.body_id].reshape(3, 3)[:, 0].copy()
+
+
+@dataclass
 class StaticPiece:
     """A fixed body whose table position changes per episode (mats, tiles, button bases)."""
 
@@ -218,6 +256,35 @@ class Tray(StaticPiece):
 
     def contains(self, model: mujoco.MjModel, xy) -> bool:
         return bool(np.all(np.abs(np.asarray(xy)[:2] - self.xy(model)) <= self.inner / 2))
+
+
+@dataclass
+class BatteryHolder(StaticPiece):
+    """Two battery slots side by side (along x, ``spacing`` apart), each a pair of contact
+    plates at the ends of a cell lying along y. The plates stand taller than a cell, so the
+    head camera cannot see which way an inserted cell points."""
+
+    spacing: float = 0.07
+    slot_length: float = 0.066
+    plate: tuple = (0.03, 0.004, 0.03)  # x, y, z extent of a contact plate
+    rgba: tuple = (0.3, 0.3, 0.34, 1.0)
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        body = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP])
+        px, py, pz = (v / 2 for v in self.plate)
+        body.add_geom(name=f"{self.name}/base", type=BOX,
+                      size=[self.spacing / 2 + px + 0.01, self.slot_length / 2 + py * 2, 0.001],
+                      pos=[0, 0, 0.001], rgba=[0.45, 0.45, 0.5, 1], contype=0, conaffinity=0)
+        for k in (0, 1):
+            x = (k - 0.5) * self.spacing
+            for end in (-1, 1):
+                body.add_geom(name=f"{self.name}/plate{k}{'ab'[end > 0]}", type=BOX,
+                              size=[px, py, pz],
+                              pos=[x, end * (self.slot_length / 2 + py), pz], rgba=list(self.rgba))
+
+    def slot(self, model: mujoco.MjModel, k: int) -> np.ndarray:
+        """Table xy of slot ``k`` (0 left, 1 right)."""
+        return self.xy(model) + np.array([(k - 0.5) * self.spacing, 0.0])
 
 
 LAMP_COLOURS = {"off": (0.3, 0.3, 0.3, 1.0), "red": (1.0, 0.1, 0.1, 1.0),

@@ -1,6 +1,7 @@
 """Tasks: one file per task, registered by name and gym id."""
 
 from rmbench.tasks import (  # noqa: F401  (registers)
+    battery_try,
     blocks_ranking_try,
     cover_blocks,
     press_button,

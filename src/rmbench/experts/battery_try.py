@@ -1,0 +1,45 @@
+"""Expert for battery_try: both batteries in positive-away, then flip through the fixed try
+order while the lamp stays off. It learns the answer only from the lamp, as a policy would."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rmbench.experts.base import ScriptedExpert, register_expert
+from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks.battery_try import PAIRS, TRIES
+
+OPENING = 0.5  # enough for a 24 mm cell, narrow beside the holder's plates
+AWAY = np.pi / 2  # yaw of a positive end pointing away from the robot
+HOVER = 0.06  # clears the 3 cm contact plates with a cell in hand
+
+
+def wrap(a: float) -> float:
+    return float((a + np.pi) % (2 * np.pi) - np.pi)
+
+
+@register_expert
+class BatteryTryExpert(ScriptedExpert):
+    task = "battery_try"
+
+    def plan(self, task):
+        m, data, model = self.motion, task.data, task.model
+
+        def move(k, target_yaw, side):
+            battery = task.batteries[k]
+            yaw = np.arctan2(*battery.axis(data)[1::-1])
+            yield from m.clear_for(side)
+            # fingers close across the cell: grasp yaws are the axis + 90 deg, mod 180 deg
+            yield from m.transfer(side, battery.pos(data), yaw + np.pi / 2, 2 * battery.radius,
+                                  (*task.holder.slot(model, k), TABLE_TOP), symmetry=np.pi,
+                                  turn=wrap(target_yaw - yaw), opening=OPENING, hover=HOVER)
+
+        # Each arm inserts the battery on its side; the left arm then makes every flip, so the
+        # arms trade places once instead of before every try.
+        yield from self.label(0, move(0, AWAY, "left"))
+        yield from self.label(1, move(1, AWAY, "right"))
+        for before, after in zip(TRIES, PAIRS, strict=True):
+            if task.lamp.state == "green":
+                break
+            k = 0 if before[0] != after[0] else 1
+            yield from self.label(2 + k, move(k, AWAY if after[k] == 0 else -AWAY, "left"))

@@ -1,0 +1,147 @@
+"""battery_try — M(n).
+
+Task: a holder with two slots stands at the centre, with an indicator lamp behind it; two
+batteries lie to its left and right. Insert both batteries positive end first (pointing away
+from the robot); while the lamp stays off, try the next orientation pair in the fixed order
+[1,0], [1,1], [0,1] (0 = positive away, 1 = reversed; left, right), flipping only the battery
+whose orientation changes. The lamp turns green when both sit in the slots the right way.
+
+Randomization: holder centre x ~ U[-0.03, 0.03], y ~ U[-0.10, -0.06]; slots 7 cm apart (the
+benchmark's 4 cm leaves no room for the fingers beside a neighbouring cell); batteries 0.17 m
+left and right of the holder, y jitter U[-0.02, 0.02], lying along y with the positive end
+either way and yaw noise U[-0.25, 0.25]; the correct pair uniformly of [1,0], [1,1], [0,1]
+([0,0] is never correct).
+
+Success: both batteries in their slots (within 1 cm, along the slot), in the correct
+orientations, lamp on, neither touched by a finger.
+Failure: a battery off the table.
+
+Memory: TMC M(n). Aliasing point: the slots' contact plates hide the cells' ends from the
+head camera, so after a failed try the holder looks like after any other failed try; only the
+past tells which pairs were already tried.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rmbench.sim.objects import Battery, BatteryHolder, Lamp
+from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.registry import register
+
+PAIRS = ((1, 0), (1, 1), (0, 1))  # candidates for the hidden pair, also the order of tries
+TRIES = ((0, 0), *PAIRS)
+SLOT_TOL = 0.01
+SIDE_OFFSET = 0.17
+
+
+def flips(correct: tuple[int, int]) -> list[int]:
+    """Which battery (0 left, 1 right) each try after the first flips, until ``correct``."""
+    out = []
+    for before, after in zip(TRIES, TRIES[1:], strict=False):
+        out.append(0 if before[0] != after[0] else 1)
+        if after == correct:
+            break
+    return out
+
+
+@register
+class BatteryTry(Task):
+    name = "battery_try"
+    gym_id = "rmbench/BatteryTry-v0"
+    tmc = "M(n)"
+    step_limit = 1000
+    subtasks = ("insert the left battery", "insert the right battery",
+                "flip the left battery", "flip the right battery")
+    instructions_seen = (
+        "Put both batteries into the holder and flip them until the light turns on.",
+        "Insert the two batteries, then try other orientations until the lamp lights up.",
+        "Load the battery holder and keep flipping batteries until the indicator turns green.",
+        "Place the batteries in the slots positive end first, then find the orientation that "
+        "lights the lamp.",
+    )
+    instructions_unseen = (
+        "Fit both cells into the holder and reverse them one at a time until the light comes "
+        "on.",
+        "Get the indicator to light by inserting the batteries and trying orientations.",
+    )
+    aliasing_point = "after a failed try: the holder hides the cells' ends and the lamp is off"
+    aliasing_stage = 3
+    hidden_keys = ("correct",)
+
+    def __init__(self):
+        super().__init__()
+        self.holder = BatteryHolder("holder")
+        self.lamp = Lamp("lamp")
+        self.batteries = (Battery("battery_left"), Battery("battery_right"))
+        self.correct: tuple[int, int] = PAIRS[0]
+        self.cursor = 0
+
+    @property
+    def pieces(self):
+        return (self.holder, self.lamp, *self.batteries)
+
+    def build(self, spec) -> None:
+        for piece in self.pieces:
+            piece.build(spec)
+
+    def bind(self, model, data) -> None:
+        super().bind(model, data)
+        for piece in self.pieces:
+            piece.bind(model)
+
+    def initialize(self, rng: np.random.Generator) -> None:
+        self.begin_episode()
+        hx, hy = rng.uniform(-0.03, 0.03), rng.uniform(-0.10, -0.06)
+        self.holder.move(self.model, (hx, hy))
+        self.lamp.move(self.model, (hx, hy + 0.08))
+        self.lamp.set(self.model, "off")
+        for k, battery in enumerate(self.batteries):
+            x = hx + (2 * k - 1) * SIDE_OFFSET
+            pointing = np.pi / 2 if rng.uniform() < 0.5 else -np.pi / 2
+            battery.place(self.data, (x, hy + rng.uniform(-0.02, 0.02)),
+                          yaw=pointing + rng.uniform(-0.25, 0.25))
+        drawn = PAIRS[int(rng.integers(len(PAIRS)))]
+        self.correct = tuple(self.choose("correct", drawn, PAIRS))
+        self.cursor = 0
+
+    def plan(self) -> list[int]:
+        return [0, 1, *(2 + k for k in flips(self.correct))]
+
+    def hidden_state(self) -> dict:
+        return {"correct": list(self.correct)}
+
+    def orientation(self, k: int) -> int | None:
+        """0/1 if battery ``k`` rests, released, in slot ``k`` along the slot; else None."""
+        battery = self.batteries[k]
+        if not battery.resting(self.data) or self.touched_by_fingers(battery.body_id):
+            return None
+        if np.linalg.norm(battery.pos(self.data)[:2] - self.holder.slot(self.model, k)) > SLOT_TOL:
+            return None
+        along = battery.axis(self.data)[1]
+        if abs(along) < 0.95:
+            return None
+        return 0 if along > 0 else 1
+
+    def evaluate(self) -> Evaluation:
+        config = (self.orientation(0), self.orientation(1))
+        lit = config == self.correct
+        self.lamp.set(self.model, "green" if lit else "off")
+        plan = self.plan()
+        # Inserts end with the cell in its slot positive-away; each flip ends when the pair
+        # shows the next try of the sequence.
+        if self.cursor < 2:
+            if config[self.cursor] == 0:
+                self.cursor += 1
+        elif self.cursor < len(plan) and config == TRIES[self.cursor - 1]:
+            self.cursor += 1
+        reason = ""
+        if min(b.pos(self.data)[2] for b in self.batteries) < TABLE_TOP - 0.05:
+            reason = "a battery fell off the table"
+        stage, progress = self.advance(self.cursor, self.cursor / len(plan))
+        preds = {"left_orientation": -1 if config[0] is None else config[0],
+                 "right_orientation": -1 if config[1] is None else config[1],
+                 "lamp": self.lamp.state, "correct": list(self.correct)}
+        return Evaluation(success=lit and not reason, failure=bool(reason), progress=progress,
+                          stage=stage, failure_reason=reason, predicates=preds)
