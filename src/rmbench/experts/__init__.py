@@ -8,6 +8,7 @@ from rmbench.experts import (  # noqa: F401  (registers)
     put_back_block,
     rearrange_blocks,
     swap_blocks,
+    swap_t,
 )
 from rmbench.experts.base import EXPERTS, ScriptedExpert, make_expert
 

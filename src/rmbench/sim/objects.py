@@ -159,6 +159,34 @@ class Cover(FreePiece):
 
 
 @dataclass
+class TBlock(FreePiece):
+    """A flat T: a stem along body y with a crossbar across its +y end. The body origin is the
+    middle of the stem, where the gripper takes it (fingers closing along body x)."""
+
+    width: float = 0.03  # of both bars
+    stem: float = 0.07
+    bar: float = 0.10
+    thickness: float = 0.03
+    mass: float = 0.06
+
+    @property
+    def rest_height(self) -> float:
+        return self.thickness / 2
+
+    def _geoms(self, body) -> None:
+        w, t = self.width / 2, self.thickness / 2
+        kw = {"rgba": list(self.rgba), "friction": [1.0, 0.005, 0.0001], "condim": 4}
+        body.add_geom(name=f"{self.name}/geom", type=BOX, size=[w, self.stem / 2, t], **kw)
+        body.add_geom(name=f"{self.name}/bar", type=BOX, size=[self.bar / 2, w, t],
+                      pos=[0, self.stem / 2 + w, 0], **kw)
+        _explicit_inertia(body, self.mass, [self.bar / 2, (self.stem + self.width) / 2, t])
+
+    def paint(self, model: mujoco.MjModel, rgba) -> None:
+        model.geom_rgba[self.geom_id] = rgba
+        model.geom_rgba[model.geom(f"{self.name}/bar").id] = rgba
+
+
+@dataclass
 class Battery(FreePiece):
     """A cylinder cell lying on its side along body x, with its positive terminal (a bright
     nub and end face) at +x. ``yaw`` is the direction the positive end points."""

@@ -8,6 +8,7 @@ from rmbench.tasks import (  # noqa: F401  (registers)
     put_back_block,
     rearrange_blocks,
     swap_blocks,
+    swap_t,
 )
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import TASKS, UnknownTaskError, get_task

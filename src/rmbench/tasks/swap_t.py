@@ -1,0 +1,127 @@
+"""swap_T — M(1).
+
+Task: a red and a blue T-shaped block lie on the table side by side, each turned by a random
+yaw. Pick both up (one per arm), then put each one down where the other lay, in the other's
+orientation.
+
+Randomization: T centres (the middle of the stem) at x ~ -0.09 and +0.09 (each +-1 cm),
+y ~ U[-0.15, -0.10]; yaws ~ U[-0.75, 0.75]; which colour lies left uniformly.
+
+Success: each T within 2.5 cm (xy) and 15 degrees of the other's starting pose, resting on
+the table, neither touched by a finger.
+Failure: a T off the table or tipped over on the table.
+
+Memory: TMC M(1). Aliasing point: once both are lifted (and held in a fixed carrying pose),
+their starting poses are no longer visible.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rmbench.sim.objects import TBlock
+from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.registry import register
+
+POS_TOL = 0.025
+YAW_TOL = np.deg2rad(15)
+LIFTED = 0.05
+COLOURS = ((0.85, 0.1, 0.1, 1.0), (0.1, 0.25, 0.85, 1.0))
+
+
+def yaw_error(a: float, b: float) -> float:
+    return abs(float((a - b + np.pi) % (2 * np.pi) - np.pi))
+
+
+@register
+class SwapT(Task):
+    name = "swap_T"
+    gym_id = "rmbench/SwapT-v0"
+    tmc = "M(1)"
+    step_limit = 600
+    subtasks = ("pick up the left T block", "pick up the right T block",
+                "put the right T where the left one was",
+                "put the left T where the right one was")
+    instructions_seen = (
+        "Swap the two T-shaped blocks: each one goes where the other was, facing the same way.",
+        "Pick up both T blocks and put each in the other's place and orientation.",
+        "Exchange the red and the blue T, matching the position and angle of the other.",
+        "Lift the two T blocks and set each one down at the other's starting pose.",
+    )
+    instructions_unseen = (
+        "Make the T blocks trade places, each taking over the other's pose.",
+        "Move each T-shaped piece to where the other one lay, turned the same way.",
+    )
+    aliasing_point = "both T blocks held up: their starting poses are no longer visible"
+    aliasing_stage = 2
+    hidden_keys = ("yaws",)
+
+    def __init__(self):
+        super().__init__()
+        self.blocks = (TBlock("t_left"), TBlock("t_right"))
+        self.starts = np.zeros((2, 3))  # x, y, yaw of the left and right T at the start
+
+    def build(self, spec) -> None:
+        for block in self.blocks:
+            block.build(spec)
+
+    def bind(self, model, data) -> None:
+        super().bind(model, data)
+        for block in self.blocks:
+            block.bind(model)
+
+    def initialize(self, rng: np.random.Generator) -> None:
+        self.begin_episode()
+        colours = COLOURS if rng.uniform() < 0.5 else COLOURS[::-1]
+        yaws = tuple(float(y) for y in rng.uniform(-0.75, 0.75, 2))
+        yaws = self.choose("yaws", yaws)
+        if len(yaws) != 2 or max(abs(float(y)) for y in yaws) > 0.75:
+            raise ValueError(f"{self.name}: yaws must be two angles in [-0.75, 0.75], got {yaws}")
+        for k, block in enumerate(self.blocks):
+            x = (2 * k - 1) * 0.09 + rng.uniform(-0.01, 0.01)
+            y = rng.uniform(-0.15, -0.10)
+            self.starts[k] = (x, y, float(yaws[k]))
+            block.paint(self.model, colours[k])
+            block.place(self.data, (x, y), yaw=float(yaws[k]))
+
+    def plan(self) -> list[int]:
+        return [0, 1, 2, 3]
+
+    def hidden_state(self) -> dict:
+        return {"yaws": self.starts[:, 2].round(4).tolist(),
+                "starts": self.starts.round(4).tolist()}
+
+    def at_pose(self, block: TBlock, pose) -> bool:
+        d = self.data
+        return bool(np.linalg.norm(block.pos(d)[:2] - pose[:2]) <= POS_TOL
+                    and yaw_error(block.yaw(d), pose[2]) <= YAW_TOL and block.resting(d)
+                    and not self.touched_by_fingers(block.body_id))
+
+    def evaluate(self) -> Evaluation:
+        d = self.data
+        left, right = self.blocks
+        lifted = [bool(b.pos(d)[2] > TABLE_TOP + b.rest_height + LIFTED) for b in self.blocks]
+        right_done = self.at_pose(right, self.starts[0])
+        left_done = self.at_pose(left, self.starts[1])
+        stage = 0
+        if lifted[0]:
+            stage = 1
+        if self._stage >= 1 and lifted[1]:
+            stage = 2
+        if self._stage >= 2 and right_done:
+            stage = 3
+        if self._stage >= 3 and right_done and left_done:
+            stage = 4
+        reason = ""
+        if min(b.pos(d)[2] for b in self.blocks) < TABLE_TOP - 0.05:
+            reason = "a T block fell off the table"
+        elif any(not b.upright(d, 0.5) and b.speed(d) < 0.02
+                 and not self.touched_by_fingers(b.body_id) for b in self.blocks):
+            reason = "a T block tipped over"
+        stage, progress = self.advance(stage, stage / 4)
+        preds = {"left_lifted": lifted[0], "right_lifted": lifted[1],
+                 "right_at_left_start": right_done, "left_at_right_start": left_done}
+        return Evaluation(success=stage == 4 and not reason, failure=bool(reason),
+                          progress=progress, stage=stage, failure_reason=reason,
+                          predicates=preds)
