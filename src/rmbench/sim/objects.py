@@ -224,6 +224,100 @@ class Battery(FreePiece):
         return data.xmat[self.body_id].reshape(3, 3)[:, 0].copy()
 
 
+# Procedural shapes: geom -> (half sizes, local position) for up to two boxes "a", "b" and a
+# cylinder "c" (radius, half height). Every shape is gripped at the body origin with the
+# fingers closing along body x. The fingers are 7 cm wide and lean a little, so compound
+# shapes keep everything within the grip's footprint (a T or L made of bars would put its
+# crossbar under a finger); "slab" carries a handle block on top.
+SHAPES = {
+    "cube": {"a": ((0.02, 0.02, 0.02), (0, 0, 0))},
+    "bar": {"a": ((0.014, 0.04, 0.018), (0, 0, 0))},
+    "tall": {"a": ((0.014, 0.014, 0.032), (0, 0, 0))},
+    "cylinder": {"c": ((0.018, 0.024), (0, 0, 0))},
+    "disc": {"c": ((0.026, 0.012), (0, 0, 0))},
+    "slab": {"a": ((0.015, 0.035, 0.012), (0, 0, 0)), "b": ((0.015, 0.012, 0.01), (0, 0, 0.022))},
+}
+
+
+def footprint(shape: str) -> float:
+    """Radius of the circle around the grip point that holds the shape in the table plane."""
+    return max(np.hypot(abs(p[0]) + (s[0]), abs(p[1]) + (s[1] if k != "c" else s[0]))
+               for k, (s, p) in SHAPES[shape].items())
+
+SHAPE_COLOURS = {"red": (0.85, 0.1, 0.1, 1.0), "green": (0.1, 0.65, 0.2, 1.0),
+                 "blue": (0.1, 0.25, 0.85, 1.0), "yellow": (0.95, 0.8, 0.1, 1.0)}
+_MAX_SIZE = {"a": (0.02, 0.04, 0.032), "b": (0.015, 0.012, 0.01), "c": (0.026, 0.024, 0)}
+HIDDEN_GROUP = 3  # not drawn by the default renderer options
+
+
+@dataclass
+class Shape(FreePiece):
+    """An object whose shape and colour are set per episode from ``SHAPES`` and
+    ``SHAPE_COLOURS``: one compiled model serves every draw. Unused geoms stop colliding and
+    move to a group the renderer does not draw. With ``free=False`` it is a fixed display copy
+    (the reference on the shelf) that never collides."""
+
+    free: bool = True
+    shape: str = "cube"
+    colour: str = "red"
+    geom_ids: dict = field(default_factory=dict)
+    _rest: float = 0.02
+
+    @property
+    def rest_height(self) -> float:
+        return self._rest
+
+    @property
+    def height(self) -> float:
+        return 2 * self._rest
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        if self.free:
+            super().build(spec)
+            return
+        self._geoms(spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP]))
+
+    def _geoms(self, body) -> None:
+        collide = {} if self.free else {"contype": 0, "conaffinity": 0}
+        for key, size in _MAX_SIZE.items():
+            body.add_geom(name=f"{self.name}/geom" if key == "a" else f"{self.name}/{key}",
+                          type=CYLINDER if key == "c" else BOX, size=list(size),
+                          rgba=list(self.rgba), friction=[1.0, 0.005, 0.0001], condim=4,
+                          **collide)
+        if self.free:
+            _explicit_inertia(body, self.mass, [0.02, 0.02, 0.02])
+
+    def bind(self, model: mujoco.MjModel) -> None:
+        if self.free:
+            super().bind(model)
+        else:
+            self.body_id = model.body(self.name).id
+        self.geom_ids = {k: model.geom(f"{self.name}/geom" if k == "a" else f"{self.name}/{k}").id
+                         for k in _MAX_SIZE}
+
+    def configure(self, model: mujoco.MjModel, shape: str, colour: str) -> None:
+        """Become ``shape`` in ``colour`` (call before placing)."""
+        self.shape, self.colour = shape, colour
+        parts = SHAPES[shape]
+        self._rest = max(size[-1] if k != "c" else size[1] for k, (size, _) in parts.items())
+        for key, gid in self.geom_ids.items():
+            used = key in parts
+            model.geom_group[gid] = 0 if used else HIDDEN_GROUP
+            model.geom_contype[gid] = model.geom_conaffinity[gid] = int(used and self.free)
+            model.geom_rgba[gid] = SHAPE_COLOURS[colour]
+            if used:
+                size, pos = parts[key]
+                model.geom_size[gid][: len(size)] = size
+                model.geom_pos[gid] = pos
+        if not self.free:
+            model.body_pos[self.body_id][2] = TABLE_TOP + self._rest
+
+    def show_at(self, model: mujoco.MjModel, xyz, yaw: float) -> None:
+        """Place the fixed display copy with its bottom at height ``xyz[2]``."""
+        model.body_pos[self.body_id] = (xyz[0], xyz[1], xyz[2] + self._rest)
+        model.body_quat[self.body_id] = (np.cos(yaw / 2), 0, 0, np.sin(yaw / 2))
+
+
 @dataclass
 class StaticPiece:
     """A fixed body whose table position changes per episode (mats, tiles, button bases)."""
@@ -464,3 +558,25 @@ class NumberTile(StaticPiece):
         for seg, gid in self.seg_ids.items():
             lit = seg in DIGIT_SEGMENTS[digit]
             model.geom_rgba[gid] = self.ink_rgba if lit else self.tile_rgba
+
+
+@dataclass
+class Wall(StaticPiece):
+    """A box that can appear and disappear between steps: shelves, the screen. Hidden, it
+    waits under the floor."""
+
+    size: tuple = (0.3, 0.01, 0.2)  # half extents
+    rgba: tuple = (0.35, 0.38, 0.42, 1.0)
+    solid: bool = True
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        body = spec.worldbody.add_body(name=self.name, pos=[0, 0, -1.0])
+        collide = {} if self.solid else {"contype": 0, "conaffinity": 0}
+        body.add_geom(name=f"{self.name}/geom", type=BOX, size=list(self.size),
+                      rgba=list(self.rgba), **collide)
+
+    def show(self, model: mujoco.MjModel, xy, bottom: float = TABLE_TOP) -> None:
+        model.body_pos[self.body_id] = (xy[0], xy[1], bottom + self.size[2])
+
+    def hide(self, model: mujoco.MjModel) -> None:
+        model.body_pos[self.body_id] = (0.0, 0.0, -1.0)

@@ -4,6 +4,7 @@ from rmbench.tasks import (  # noqa: F401  (registers)
     battery_try,
     blocks_ranking_try,
     cover_blocks,
+    observe_and_pickup,
     press_button,
     put_back_block,
     rearrange_blocks,
