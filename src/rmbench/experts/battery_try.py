@@ -38,8 +38,11 @@ class BatteryTryExpert(ScriptedExpert):
         # arms trade places once instead of before every try.
         yield from self.label(0, move(0, AWAY, "left"))
         yield from self.label(1, move(1, AWAY, "right"))
+        ready = (*task.holder.xy(model), TABLE_TOP + 0.15)
         for before, after in zip(TRIES, PAIRS, strict=True):
             if task.lamp.state == "green":
                 break
             k = 0 if before[0] != after[0] else 1
+            if "left" in m.away:  # between tries the arm waits above the holder, always the same
+                yield from self.label(2 + k, m.move_to("left", ready, m.gripper_yaw("left")))
             yield from self.label(2 + k, move(k, AWAY if after[k] == 0 else -AWAY, "left"))

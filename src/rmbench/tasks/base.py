@@ -53,6 +53,9 @@ class Task:
     # may fix: the layout is drawn from the seed as usual, only these values are replaced.
     # Two episodes that differ only there are how the aliasing tests show a task needs memory.
     hidden_keys: ClassVar[tuple[str, ...]] = ()
+    # Two moments that look alike but need different actions, each (hidden values, stage,
+    # n): the n-th expert segment start after the env reached that stage (rmbench.aliasing).
+    aliasing_pair: ClassVar[tuple[tuple[dict, int, int], tuple[dict, int, int]]]
 
     def __init__(self):
         self.model: mujoco.MjModel | None = None

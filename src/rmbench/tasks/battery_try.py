@@ -69,6 +69,7 @@ class BatteryTry(Task):
     aliasing_point = "after a failed try: the holder hides the cells' ends and the lamp is off"
     aliasing_stage = 3
     hidden_keys = ("correct",)
+    aliasing_pair = (({"correct": (1, 1)}, 3, 2), ({"correct": (0, 1)}, 4, 2))
 
     def __init__(self):
         super().__init__()

@@ -83,6 +83,8 @@ class BlocksRankingTry(Task):
     aliasing_point = "after a red verdict: the row looks like any other wrong order"
     aliasing_stage = 1
     hidden_keys = ("initial_order", "target_order")
+    aliasing_pair = (({"initial_order": (0, 1, 2), "target_order": (2, 1, 0)}, 3, 1),
+                     ({"initial_order": (0, 2, 1), "target_order": (2, 1, 0)}, 1, 1))
 
     def __init__(self):
         super().__init__()

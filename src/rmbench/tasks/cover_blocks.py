@@ -66,6 +66,8 @@ class CoverBlocks(Task):
     aliasing_point = "all three blocks covered: the colours are invisible"
     aliasing_stage = 3
     hidden_keys = ("colours",)
+    aliasing_pair = (({"colours": ("red", "green", "blue")}, 3, 1),
+                     ({"colours": ("blue", "red", "green")}, 3, 1))
 
     def __init__(self):
         super().__init__()

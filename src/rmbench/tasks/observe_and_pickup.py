@@ -65,6 +65,7 @@ class ObserveAndPickup(Task):
     aliasing_point = "after the screen rises: the same table whatever the reference was"
     aliasing_stage = 1
     hidden_keys = ("target",)
+    aliasing_pair = (({"target": 0}, 1, 1), ({"target": 3}, 1, 1))
 
     def __init__(self):
         super().__init__()
@@ -171,7 +172,8 @@ class ObserveAndPickup(Task):
         if self.moved_early:
             reason = "the robot moved while the reference was shown"
         elif wrong:
-            reason = f"picked up a wrong object ({self.objects[wrong[0]].colour} {self.objects[wrong[0]].shape})"
+            other = self.objects[wrong[0]]
+            reason = f"picked up a wrong object ({other.colour} {other.shape})"
         elif min(o.pos(d)[2] for o in self.objects) < TABLE_TOP - 0.05:
             reason = "an object fell off the table"
         stage = 2 if lifted else 1 if self.screen_up else 0

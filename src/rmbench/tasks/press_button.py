@@ -53,6 +53,7 @@ class PressButton(Task):
     aliasing_point = "between presses: a released button looks the same after any count"
     aliasing_stage = 1  # after the first press
     hidden_keys = ("d1", "d2")
+    aliasing_pair = (({"d1": 3, "d2": 2}, 2, 1), ({"d1": 3, "d2": 2}, 3, 1))
 
     def __init__(self):
         super().__init__()

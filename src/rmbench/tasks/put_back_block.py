@@ -53,6 +53,7 @@ class PutBackBlock(Task):
     aliasing_point = "cube at the centre, around the press: the four mats look identical"
     aliasing_stage = 2  # the press has happened; the cube still sits at the centre
     hidden_keys = ("original_mat",)
+    aliasing_pair = (({"original_mat": "left"}, 2, 1), ({"original_mat": "front"}, 2, 1))
 
     def __init__(self):
         super().__init__()

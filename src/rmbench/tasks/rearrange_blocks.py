@@ -62,6 +62,7 @@ class RearrangeBlocks(Task):
     aliasing_point = "after the press: both blocks sit on identical mats"
     aliasing_stage = 2
     hidden_keys = ("loaded_mat",)
+    aliasing_pair = (({"loaded_mat": "left"}, 2, 1), ({"loaded_mat": "right"}, 2, 1))
 
     def __init__(self):
         super().__init__()

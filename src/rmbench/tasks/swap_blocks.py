@@ -65,6 +65,7 @@ class SwapBlocks(Task):
     aliasing_point = "after any move: two full trays and an empty one, like a fresh start"
     aliasing_stage = 2
     hidden_keys = ("empty_tray",)
+    aliasing_pair = (({"empty_tray": 2}, 3, 2), ({"empty_tray": 2}, 0, 1))
 
     def __init__(self):
         super().__init__()

@@ -1,0 +1,45 @@
+"""Aliasing points, measured for every task: head-camera pixel distance between the two
+moments of ``Task.aliasing_pair`` vs the same moment in an unrelated seed, and how far the
+expert's subsequent actions diverge.
+
+    python benchmarks/aliasing.py [--seed 100000] [--out benchmarks/results/aliasing.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import rmbench  # noqa: F401  (GL backend before mujoco)
+from rmbench.aliasing import measure
+from rmbench.tasks.registry import ordered
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seed", type=int, default=100000)
+    ap.add_argument("--out", default="benchmarks/results/aliasing.json")
+    args = ap.parse_args()
+    rows = []
+    print(f"{'task':<20} {'TMC':<5} {'alias px':>9} {'unrelated px':>13} {'ratio':>6} "
+          f"{'action div':>10}  next subtasks")
+    for cls in ordered():
+        r = measure(cls.name, seed=args.seed)
+        rows.append({**r.to_dict(), "tmc": cls.tmc})
+        same = r.next_subtasks[0] == r.next_subtasks[1]
+        nxt = f"same text ({r.next_subtasks[0]})" if same else " / ".join(r.next_subtasks)
+        print(f"{r.task:<20} {cls.tmc:<5} {r.pixel_distance:>9.3f} {r.unrelated_distance:>13.3f} "
+              f"{r.ratio:>6.3f} {r.action_divergence:>10.3f}  {nxt}", flush=True)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(f".tmp{os.getpid()}")
+    tmp.write_text(json.dumps({"seed": args.seed, "camera": "head 320x240", "tasks": rows},
+                              indent=2))
+    os.replace(tmp, out)
+    print(f"\nwrote {out}")
+
+
+if __name__ == "__main__":
+    main()
