@@ -1,4 +1,5 @@
-"""docs/tasks/<task>.png: the head camera at the first frame and at the aliasing point.
+"""docs/tasks/<task>.png: the head camera at the first frame, then the task's two aliasing
+moments (``Task.aliasing_pair``): alike to the camera, different next actions.
 
     .venv/bin/python scripts/make_task_pictures.py [--seed 100000] [--out docs/tasks]
 """
@@ -12,27 +13,14 @@ import numpy as np
 from PIL import Image
 
 import rmbench
-from rmbench.experts import make_expert
-
-SETTLE = 15  # steps after the aliasing stage is reached, so the arm has moved off
+from rmbench.aliasing import capture
 
 
-def aliasing_frames(task: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def first_frame(task: str, seed: int) -> np.ndarray:
     env = rmbench.make(task, cameras=("head",))
-    expert = make_expert(env)
-    obs, info = env.reset(seed=seed)
-    expert.reset(info["instruction"], info)
-    first = obs["pixels"]["head"]
-    stage = env.unwrapped.task.aliasing_stage
-    reached = None
-    for step in range(env.unwrapped.step_limit):
-        obs, _, terminated, truncated, info = env.step(expert.act(obs))
-        if reached is None and info["subtask_step"] >= stage:
-            reached = step
-        if (reached is not None and step >= reached + SETTLE) or terminated or truncated:
-            break
+    obs, _ = env.reset(seed=seed)
     env.close()
-    return first, obs["pixels"]["head"]
+    return obs["pixels"]["head"]
 
 
 def main() -> None:
@@ -42,10 +30,12 @@ def main() -> None:
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    for name in sorted(rmbench.TASKS):
-        first, alias = aliasing_frames(name, args.seed)
-        gap = np.full((first.shape[0], 6, 3), 255, np.uint8)
-        Image.fromarray(np.concatenate([first, gap, alias], axis=1)).save(out / f"{name}.png")
+    for name, cls in sorted(rmbench.TASKS.items()):
+        frames = [first_frame(name, args.seed)]
+        frames += [capture(name, args.seed, *m).frame for m in cls.aliasing_pair]
+        gap = np.full((frames[0].shape[0], 6, 3), 255, np.uint8)
+        row = [frames[0], gap, frames[1], gap, frames[2]]
+        Image.fromarray(np.concatenate(row, axis=1)).save(out / f"{name}.png")
         print(f"wrote {out / name}.png")
 
 

@@ -18,7 +18,6 @@ from rmbench.experts import make_expert
 from rmbench.tasks import get_task
 
 
-
 @dataclass
 class Moment:
     frame: np.ndarray  # head camera, HxWx3 uint8
