@@ -132,10 +132,13 @@ class BatteryTry(Task):
         plan = self.plan()
         # Inserts end with the cell in its slot positive-away; each flip ends when the pair
         # shows the next try of the sequence.
-        if self.cursor < 2:
-            if config[self.cursor] == 0:
-                self.cursor += 1
-        elif self.cursor < len(plan) and config == TRIES[self.cursor - 1]:
+        while self.cursor < len(plan):
+            if self.cursor < 2:
+                done = config[self.cursor] == 0
+            else:
+                done = config == TRIES[self.cursor - 1]
+            if not done:
+                break
             self.cursor += 1
         reason = ""
         if min(b.pos(self.data)[2] for b in self.batteries) < TABLE_TOP - 0.05:
