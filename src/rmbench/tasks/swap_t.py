@@ -56,7 +56,7 @@ class SwapT(Task):
     aliasing_point = "both T blocks held up: their starting poses are no longer visible"
     aliasing_stage = 2
     hidden_keys = ("yaws",)
-    aliasing_pair = (({"yaws": (0.5, -0.3)}, 2, 1), ({"yaws": (-0.6, 0.2)}, 2, 1))
+    aliasing_pair = (({"yaws": (0.5, -0.3)}, 2, 2), ({"yaws": (-0.6, 0.2)}, 2, 2))
 
     def __init__(self):
         super().__init__()
