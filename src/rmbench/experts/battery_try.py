@@ -6,16 +6,13 @@ from __future__ import annotations
 import numpy as np
 
 from rmbench.experts.base import ScriptedExpert, register_expert
+from rmbench.sim.geometry import wrap_angle
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks.battery_try import PAIRS, TRIES
 
 OPENING = 0.5  # enough for a 24 mm cell, narrow beside the holder's plates
 AWAY = np.pi / 2  # yaw of a positive end pointing away from the robot
 HOVER = 0.06  # clears the 3 cm contact plates with a cell in hand
-
-
-def wrap(a: float) -> float:
-    return float((a + np.pi) % (2 * np.pi) - np.pi)
 
 
 @register_expert
@@ -32,7 +29,7 @@ class BatteryTryExpert(ScriptedExpert):
             # fingers close across the cell: grasp yaws are the axis + 90 deg, mod 180 deg
             yield from m.transfer(side, battery.pos(data), yaw + np.pi / 2, 2 * battery.radius,
                                   (*task.holder.slot(model, k), TABLE_TOP), symmetry=np.pi,
-                                  turn=wrap(target_yaw - yaw), opening=OPENING, hover=HOVER)
+                                  turn=wrap_angle(target_yaw - yaw), opening=OPENING, hover=HOVER)
 
         # Each arm inserts the battery on its side; the left arm then makes every flip, so the
         # arms trade places once instead of before every try.

@@ -8,14 +8,11 @@ import numpy as np
 
 from rmbench.experts.base import ScriptedExpert, register_expert
 from rmbench.experts.motion import FINE_SPEED, grasp_yaw
+from rmbench.sim.geometry import wrap_angle
 from rmbench.sim.station import TABLE_TOP
 
 CARRY_YAW = 0.0  # every T is held at this yaw while lifted: the carried pose says nothing
 WAIT = {"left": (-0.26, -0.12, TABLE_TOP + 0.20), "right": (0.26, -0.12, TABLE_TOP + 0.20)}
-
-
-def wrap(a: float) -> float:
-    return float((a + np.pi) % (2 * np.pi) - np.pi)
 
 
 @register_expert
@@ -33,13 +30,13 @@ class SwapTExpert(ScriptedExpert):
 
         def carry(side, block):
             g = grips[side]
-            turn = wrap(CARRY_YAW - block.yaw(data))
+            turn = wrap_angle(CARRY_YAW - block.yaw(data))
             yield from m.twist(side, turn)
             grips[side] = g + turn  # gripper yaw while the T sits at CARRY_YAW
             yield from m.move_to(side, WAIT[side], grips[side])
 
         def put(side, block, pose):
-            turn = wrap(pose[2] - CARRY_YAW)
+            turn = wrap_angle(pose[2] - CARRY_YAW)
             yield from m.twist(side, turn)
             g = grips[side] + turn
             yield from m.place(side, (pose[0], pose[1], TABLE_TOP), g, block.thickness)

@@ -65,11 +65,19 @@ class Task:
         self.overrides: dict[str, Any] = {}
 
     # -- hooks ------------------------------------------------------------------------
-    def build(self, spec: mujoco.MjSpec) -> None:
+    @property
+    def pieces(self) -> tuple:
+        """Every scene piece of the task (sim.objects); built and bound here in order."""
         raise NotImplementedError
+
+    def build(self, spec: mujoco.MjSpec) -> None:
+        for piece in self.pieces:
+            piece.build(spec)
 
     def bind(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         self.model, self.data = model, data
+        for piece in self.pieces:
+            piece.bind(model)
         self._fingers = {model.geom(f"{side}/10_{f}_gripper_finger").id
                          for side in ("left", "right") for f in ("left", "right")}
 
@@ -120,6 +128,10 @@ class Task:
         self._stage = max(self._stage, stage)
         self._best_progress = max(self._best_progress, progress)
         return self._stage, self._best_progress
+
+    def released(self, piece) -> bool:
+        """The piece rests on the table, still, and no finger touches it."""
+        return piece.resting(self.data) and not self.touched_by_fingers(piece.body_id)
 
     def stacked(self, cubes) -> bool:
         """Some cube rests, released, on top of another (stacking is a failure where cubes

@@ -83,15 +83,6 @@ class BatteryTry(Task):
     def pieces(self):
         return (self.holder, self.lamp, *self.batteries)
 
-    def build(self, spec) -> None:
-        for piece in self.pieces:
-            piece.build(spec)
-
-    def bind(self, model, data) -> None:
-        super().bind(model, data)
-        for piece in self.pieces:
-            piece.bind(model)
-
     def initialize(self, rng: np.random.Generator) -> None:
         self.begin_episode()
         hx, hy = rng.uniform(-0.03, 0.03), rng.uniform(-0.10, -0.06)
@@ -116,7 +107,7 @@ class BatteryTry(Task):
     def orientation(self, k: int) -> int | None:
         """0/1 if battery ``k`` rests, released, in slot ``k`` along the slot; else None."""
         battery = self.batteries[k]
-        if not battery.resting(self.data) or self.touched_by_fingers(battery.body_id):
+        if not self.released(battery):
             return None
         if np.linalg.norm(battery.pos(self.data)[:2] - self.holder.slot(self.model, k)) > SLOT_TOL:
             return None

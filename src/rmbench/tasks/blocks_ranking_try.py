@@ -103,15 +103,6 @@ class BlocksRankingTry(Task):
     def pieces(self):
         return (*self.cubes, self.button, self.lamp)
 
-    def build(self, spec) -> None:
-        for piece in self.pieces:
-            piece.build(spec)
-
-    def bind(self, model, data) -> None:
-        super().bind(model, data)
-        for piece in self.pieces:
-            piece.bind(model)
-
     def initialize(self, rng: np.random.Generator) -> None:
         self.begin_episode()
         h0 = rng.uniform()
@@ -153,7 +144,7 @@ class BlocksRankingTry(Task):
         """Colours in the slots left to right, if every cube rests released in a slot."""
         out = [None, None, None]
         for colour, cube in enumerate(self.cubes):
-            if not cube.resting(self.data) or self.touched_by_fingers(cube.body_id):
+            if not self.released(cube):
                 return None
             xy = cube.pos(self.data)[:2]
             slot = next((k for k in range(3)

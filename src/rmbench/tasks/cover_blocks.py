@@ -83,15 +83,6 @@ class CoverBlocks(Task):
     def pieces(self):
         return (*self.cubes, *self.covers)
 
-    def build(self, spec) -> None:
-        for piece in self.pieces:
-            piece.build(spec)
-
-    def bind(self, model, data) -> None:
-        super().bind(model, data)
-        for piece in self.pieces:
-            piece.bind(model)
-
     def initialize(self, rng: np.random.Generator) -> None:
         self.begin_episode()
         xc, y = rng.uniform(-0.02, 0.02), rng.uniform(-0.17, -0.15)

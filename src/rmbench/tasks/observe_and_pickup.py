@@ -83,14 +83,8 @@ class ObserveAndPickup(Task):
     def pieces(self):
         return (*self.objects, self.reference, self.shelf, self.screen)
 
-    def build(self, spec) -> None:
-        for piece in self.pieces:
-            piece.build(spec)
-
     def bind(self, model, data) -> None:
         super().bind(model, data)
-        for piece in self.pieces:
-            piece.bind(model)
         self._sites = [model.site(f"{s}/grasp").id for s in ("left", "right")]
 
     def initialize(self, rng: np.random.Generator) -> None:

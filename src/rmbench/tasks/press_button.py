@@ -68,14 +68,9 @@ class PressButton(Task):
     def buttons(self) -> dict[str, Button]:
         return {"left": self.left, "middle": self.middle, "confirm": self.confirm}
 
-    def build(self, spec) -> None:
-        for piece in (*self.buttons.values(), *self.tiles):
-            piece.build(spec)
-
-    def bind(self, model, data) -> None:
-        super().bind(model, data)
-        for piece in (*self.buttons.values(), *self.tiles):
-            piece.bind(model)
+    @property
+    def pieces(self):
+        return (*self.buttons.values(), *self.tiles)
 
     def initialize(self, rng: np.random.Generator) -> None:
         self.begin_episode()

@@ -65,16 +65,9 @@ class PutBackBlock(Task):
         self.pressed_at_centre = False
         self.press_without_centre = False
 
-    def build(self, spec) -> None:
-        for mat in self.mats.values():
-            mat.build(spec)
-        self.button.build(spec)
-        self.cube.build(spec)
-
-    def bind(self, model, data) -> None:
-        super().bind(model, data)
-        for piece in (*self.mats.values(), self.button, self.cube):
-            piece.bind(model)
+    @property
+    def pieces(self):
+        return (*self.mats.values(), self.button, self.cube)
 
     def initialize(self, rng: np.random.Generator) -> None:
         self.begin_episode()
@@ -117,8 +110,7 @@ class PutBackBlock(Task):
 
     def evaluate(self) -> Evaluation:
         pos = self.cube.pos(self.data)
-        released = not self.touched_by_fingers(self.cube.body_id)
-        settled = self.cube.resting(self.data) and released
+        settled = self.released(self.cube)
         at_centre = self.cube_at_centre()
         presses = self.button.count
         on_mat = self.mat_under_cube()

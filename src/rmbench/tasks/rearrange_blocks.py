@@ -78,15 +78,6 @@ class RearrangeBlocks(Task):
     def pieces(self):
         return (*self.mats.values(), self.button, *self.cubes)
 
-    def build(self, spec) -> None:
-        for piece in self.pieces:
-            piece.build(spec)
-
-    def bind(self, model, data) -> None:
-        super().bind(model, data)
-        for piece in self.pieces:
-            piece.bind(model)
-
     def initialize(self, rng: np.random.Generator) -> None:
         self.begin_episode()
         x0, y = rng.uniform(-0.06, -0.02), rng.uniform(-0.15, -0.08)
@@ -119,13 +110,10 @@ class RearrangeBlocks(Task):
     def _near(self, cube: Cube, xy) -> bool:
         return bool(np.linalg.norm(cube.pos(self.data)[:2] - xy) <= SLOT_TOL)
 
-    def _settled(self, cube: Cube) -> bool:
-        return cube.resting(self.data) and not self.touched_by_fingers(cube.body_id)
-
     def blocks_on_mats(self) -> bool:
         a, b = self.cubes
-        return (self._near(a, self.mat_slot(self.loaded)) and self._settled(a)
-                and self._near(b, self.mat_slot(self.empty)) and self._settled(b))
+        return (self._near(a, self.mat_slot(self.loaded)) and self.released(a)
+                and self._near(b, self.mat_slot(self.empty)) and self.released(b))
 
     def on_substep(self) -> None:
         self.button.update(self.data)
@@ -140,9 +128,9 @@ class RearrangeBlocks(Task):
         a, b = self.cubes
         presses = self.button.count
         on_mats = self.blocks_on_mats()
-        a_middle = self._near(a, self.slots[1]) and self._settled(a)
-        b_middle = self._near(b, self.slots[1]) and self._settled(b)
-        b_stays = self._near(b, self.mat_slot(self.empty)) and self._settled(b)
+        a_middle = self._near(a, self.slots[1]) and self.released(a)
+        b_middle = self._near(b, self.slots[1]) and self.released(b)
+        b_stays = self._near(b, self.mat_slot(self.empty)) and self.released(b)
         done = self.pressed_on_mats and presses == 1 and a_middle and b_stays
         preds = {"blocks_on_mats": on_mats, "presses": presses,
                  "pressed_on_mats": self.pressed_on_mats, "returned_block_in_middle": a_middle,

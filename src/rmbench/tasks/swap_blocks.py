@@ -82,15 +82,6 @@ class SwapBlocks(Task):
     def pieces(self):
         return (*self.trays, self.button, *self.cubes)
 
-    def build(self, spec) -> None:
-        for piece in self.pieces:
-            piece.build(spec)
-
-    def bind(self, model, data) -> None:
-        super().bind(model, data)
-        for piece in self.pieces:
-            piece.bind(model)
-
     def initialize(self, rng: np.random.Generator) -> None:
         self.begin_episode()
         xc, y = rng.uniform(-0.02, 0.02), rng.uniform(-0.09, -0.05)
@@ -114,7 +105,7 @@ class SwapBlocks(Task):
 
     def tray_of(self, cube: Cube) -> int | None:
         """The tray a cube rests in, released; None while carried or outside every tray."""
-        if not cube.resting(self.data) or self.touched_by_fingers(cube.body_id):
+        if not self.released(cube):
             return None
         xy = cube.pos(self.data)[:2]
         return next((k for k, t in enumerate(self.trays) if t.contains(self.model, xy)), None)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rmbench.sim.geometry import wrap_angle
 from rmbench.sim.objects import TBlock
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks.base import Evaluation, Task
@@ -28,10 +29,6 @@ POS_TOL = 0.025
 YAW_TOL = np.deg2rad(15)
 LIFTED = 0.05
 COLOURS = ((0.85, 0.1, 0.1, 1.0), (0.1, 0.25, 0.85, 1.0))
-
-
-def yaw_error(a: float, b: float) -> float:
-    return abs(float((a - b + np.pi) % (2 * np.pi) - np.pi))
 
 
 @register
@@ -63,14 +60,9 @@ class SwapT(Task):
         self.blocks = (TBlock("t_left"), TBlock("t_right"))
         self.starts = np.zeros((2, 3))  # x, y, yaw of the left and right T at the start
 
-    def build(self, spec) -> None:
-        for block in self.blocks:
-            block.build(spec)
-
-    def bind(self, model, data) -> None:
-        super().bind(model, data)
-        for block in self.blocks:
-            block.bind(model)
+    @property
+    def pieces(self):
+        return self.blocks
 
     def initialize(self, rng: np.random.Generator) -> None:
         self.begin_episode()
@@ -96,8 +88,8 @@ class SwapT(Task):
     def at_pose(self, block: TBlock, pose) -> bool:
         d = self.data
         return bool(np.linalg.norm(block.pos(d)[:2] - pose[:2]) <= POS_TOL
-                    and yaw_error(block.yaw(d), pose[2]) <= YAW_TOL and block.resting(d)
-                    and not self.touched_by_fingers(block.body_id))
+                    and abs(wrap_angle(block.yaw(d) - pose[2])) <= YAW_TOL
+                    and self.released(block))
 
     def evaluate(self) -> Evaluation:
         d = self.data
