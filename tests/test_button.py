@@ -3,7 +3,7 @@
 import mujoco
 import pytest
 
-from rmbench.sim.objects import Button
+from rmbench.sim.fixtures import Button
 from rmbench.sim.station import TABLE_TOP
 
 

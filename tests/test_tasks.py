@@ -130,7 +130,7 @@ def test_press_button_press_after_confirm_fails():
 
 
 def test_press_button_tiles_show_the_digits():
-    from rmbench.sim.objects import DIGIT_SEGMENTS
+    from rmbench.sim.fixtures import DIGIT_SEGMENTS
 
     env, task = press_button_env()
     for tile, digit in zip(task.tiles, (task.d1, task.d2), strict=True):

@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmbench.sim.objects import Battery, BatteryHolder, Lamp
+from rmbench.sim.fixtures import BatteryHolder, Lamp
+from rmbench.sim.objects import Battery
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register

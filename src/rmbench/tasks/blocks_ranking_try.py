@@ -28,7 +28,8 @@ import itertools
 
 import numpy as np
 
-from rmbench.sim.objects import Button, Cube, Lamp
+from rmbench.sim.fixtures import Button, Lamp
+from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register

@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmbench.sim.objects import SHAPE_COLOURS, SHAPES, Shape, Wall, footprint
+from rmbench.sim.fixtures import Wall
+from rmbench.sim.objects import SHAPE_COLOURS, SHAPES, Shape, footprint
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmbench.sim.objects import Button, NumberTile
+from rmbench.sim.fixtures import Button, NumberTile
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmbench.sim.objects import Button, Cube, Tray
+from rmbench.sim.fixtures import Button, Tray
+from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
