@@ -1,43 +1,108 @@
-"""MP4 writing with PyAV (H.264, yuv420p), written to a temporary file and renamed into place."""
+"""MP4 I/O with PyAV: H.264 (libx264, yuv420p) encoding in memory, atomic files, decoding.
+
+Dataset videos and episode videos share one encoder. Encoding goes to memory first so that a
+file appears on disk only complete (written to a temporary name and renamed into place), and so
+that worker processes can hand finished videos to the process that owns the dataset.
+"""
 
 from __future__ import annotations
 
+import io
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import av
 import numpy as np
 
 
-class VideoWriter:
-    def __init__(self, path: str | Path, fps: int = 20, crf: int = 23):
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp.mp4")
-        self._fps, self._crf = fps, crf
+@dataclass(frozen=True)
+class VideoCodec:
+    """Encoder settings. ``ultrafast`` keeps encoding well under the cost of rendering; a GOP
+    of one second (20 frames) bounds the decode work of a random seek for frame-level readers
+    such as LeRobot's."""
+
+    crf: int = 18
+    preset: str = "ultrafast"
+    gop: int = 20
+    codec: str = "libx264"
+    pix_fmt: str = "yuv420p"
+
+    def info(self) -> dict:
+        return {"video.codec": "h264", "video.pix_fmt": self.pix_fmt, "video.crf": self.crf,
+                "video.g": self.gop, "video.preset": self.preset}
+
+
+DATASET_CODEC = VideoCodec()
+# Videos for people to watch: smaller files, no random access needed.
+PREVIEW_CODEC = VideoCodec(crf=23, preset="veryfast", gop=250)
+
+
+class Mp4Encoder:
+    """Streams RGB uint8 frames (H, W, 3) into an MP4 held in memory."""
+
+    def __init__(self, fps: int = 20, codec: VideoCodec = DATASET_CODEC):
+        self.fps, self.codec = fps, codec
+        self.frames = 0
+        self._buf = io.BytesIO()
         self._container = None
         self._stream = None
 
     def add(self, frame: np.ndarray) -> None:
+        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
+            raise ValueError(f"video frames must be (H, W, 3) uint8, got {frame.shape} {frame.dtype}")
         if self._container is None:
             h, w = frame.shape[:2]
-            self._container = av.open(str(self._tmp), mode="w")
-            self._stream = self._container.add_stream("libx264", rate=self._fps)
-            self._stream.width, self._stream.height = w - w % 2, h - h % 2
-            self._stream.pix_fmt = "yuv420p"
-            self._stream.options = {"crf": str(self._crf), "preset": "veryfast"}
+            self._container = av.open(self._buf, mode="w", format="mp4")
+            s = self._container.add_stream(self.codec.codec, rate=self.fps)
+            # yuv420p needs even sizes; odd ones lose their last row/column.
+            s.width, s.height = w - w % 2, h - h % 2
+            s.pix_fmt = self.codec.pix_fmt
+            s.codec_context.gop_size = self.codec.gop
+            s.options = {"crf": str(self.codec.crf), "preset": self.codec.preset}
+            self._stream = s
         frame = np.ascontiguousarray(frame[: self._stream.height, : self._stream.width])
         for packet in self._stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")):
             self._container.mux(packet)
+        self.frames += 1
 
-    def close(self) -> None:
+    def finish(self) -> bytes:
+        """Flush the encoder and return the MP4 file's bytes."""
         if self._container is None:
-            return
+            raise ValueError("no frames were added to the video")
         for packet in self._stream.encode():
             self._container.mux(packet)
         self._container.close()
-        os.replace(self._tmp, self.path)
         self._container = None
+        return self._buf.getvalue()
+
+
+def write_atomic(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers see the old file or the whole new one."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+class VideoWriter:
+    """An MP4 file written frame by frame; it appears at ``path`` on close, complete."""
+
+    def __init__(self, path: str | Path, fps: int = 20, codec: VideoCodec = PREVIEW_CODEC):
+        self.path = Path(path)
+        self._encoder = Mp4Encoder(fps, codec)
+
+    def add(self, frame: np.ndarray) -> None:
+        self._encoder.add(frame)
+
+    def close(self) -> None:
+        if self._encoder.frames:
+            write_atomic(self.path, self._encoder.finish())
 
     def __enter__(self):
         return self
@@ -45,6 +110,25 @@ class VideoWriter:
     def __exit__(self, *exc):
         if exc[0] is None:
             self.close()
-        elif self._container is not None:
-            self._container.close()
-            self._tmp.unlink(missing_ok=True)
+
+
+def decode_video(source: str | Path | bytes) -> np.ndarray:
+    """All frames of an MP4 (a path or its bytes) as one (T, H, W, 3) uint8 array."""
+    src = io.BytesIO(source) if isinstance(source, bytes) else str(source)
+    with av.open(src) as container:
+        stream = container.streams.video[0]
+        stream.thread_type = "AUTO"
+        frames = [f.to_ndarray(format="rgb24") for f in container.decode(stream)]
+    if not frames:
+        raise ValueError(f"{source if not isinstance(source, bytes) else 'video'} has no frames")
+    return np.stack(frames)
+
+
+def probe_video(path: str | Path) -> dict:
+    """Frame count, size and codec of an MP4 from its header, without decoding."""
+    with av.open(str(path)) as container:
+        if not container.streams.video:
+            raise ValueError("no video stream")
+        s = container.streams.video[0]
+        return {"frames": int(s.frames), "width": s.codec_context.width,
+                "height": s.codec_context.height, "codec": s.codec_context.name}

@@ -93,7 +93,8 @@ class RMBenchEnv(gym.Env):
         self._last = task.evaluate()
         plan = task.plan()
         info = {**self.spec_info, "instruction": self.instruction, "plan": plan,
-                "hidden": task.hidden_state(), **self._subtask_info(self._last, ended=False)}
+                "hidden": task.hidden_state(), "progress": self._last.progress,
+                **self._subtask_info(self._last, ended=False)}
         return self._observation(), info
 
     def step(self, action):

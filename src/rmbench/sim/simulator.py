@@ -10,10 +10,12 @@ import mujoco
 import numpy as np
 
 from rmbench.sim import robot
+from rmbench.sim.geometry import mat_to_quat
 from rmbench.sim.gl import require_rendering
 from rmbench.sim.station import MAX_QVEL, SimulationError, StationConfig, home_action
 
 ACTION_DIM = 14
+EE_POSE_DIM = 14
 # Renderers freed by the garbage collector after MuJoCo's own exit hook has terminated the
 # EGL display make EGL raise. Our hook is registered after the first context exists, i.e.
 # after MuJoCo's, so it runs first (atexit is last-in, first-out) and closes them in time.
@@ -67,6 +69,7 @@ class Simulator:
             [np.append(self.arm_range[s][:, 0], 0.0) for s in robot.SIDES])
         self.action_high = np.concatenate(
             [np.append(self.arm_range[s][:, 1], 1.0) for s in robot.SIDES])
+        self.grasp_sites = np.array([m.site(f"{side}/grasp").id for side in robot.SIDES])
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._target = np.zeros(m.nu)
 
@@ -100,6 +103,16 @@ class Simulator:
             out[7 * k: 7 * k + 6] = self.data.qpos[self.arm_qpos[side]]
             finger = self.data.qpos[self.finger_qpos[side][0]]
             out[7 * k + 6] = (finger - robot.FINGER_CLOSED) / span
+        return out
+
+    def ee_pose(self) -> np.ndarray:
+        """End-effector poses (14,): per arm the point between the fingertips (x, y, z, world
+        frame) and the gripper orientation as a unit quaternion (w, x, y, z), w >= 0."""
+        out = np.empty(EE_POSE_DIM)
+        for k, sid in enumerate(self.grasp_sites):
+            quat = mat_to_quat(self.data.site_xmat[sid].reshape(3, 3))
+            out[7 * k: 7 * k + 3] = self.data.site_xpos[sid]
+            out[7 * k + 3: 7 * k + 7] = quat if quat[0] >= 0 else -quat
         return out
 
     # ---------------------------------------------------------------- control

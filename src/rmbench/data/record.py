@@ -1,0 +1,200 @@
+"""Recording one expert demonstration: the seed search pass and the recorded pass.
+
+``search`` mode runs the expert without rendering, keeps the seed only if it succeeds, then
+replays the same actions with the cameras on. The replay must reproduce the searched episode's
+states bit for bit; a mismatch is an error, never a silently different demonstration.
+``direct`` mode records while the expert runs and drops the recording if it fails: faster when
+the expert almost never fails, wasteful when it often does.
+
+Actions are rounded to float32 before they are applied, so the stored actions replayed from
+the stored seed give back the recorded episode exactly.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rmbench.data.layout import Spec
+from rmbench.envs.registration import make
+from rmbench.experts import make_expert
+from rmbench.video import Mp4Encoder
+
+SEARCH_MODES = ("search", "direct")
+
+
+class ReplayMismatch(RuntimeError):
+    """The recorded replay diverged from the searched episode (non-deterministic physics)."""
+
+
+@dataclass
+class Trajectory:
+    """The low-dimensional content of one episode, one row per frame (observation, action)."""
+
+    instruction: str
+    hidden: dict[str, Any]
+    state: list[np.ndarray] = field(default_factory=list)
+    ee_pose: list[np.ndarray] = field(default_factory=list)
+    action: list[np.ndarray] = field(default_factory=list)
+    subtask: list[int] = field(default_factory=list)
+    progress: list[float] = field(default_factory=list)
+    success: bool = False
+    reason: str = "timeout"
+
+    def __len__(self) -> int:
+        return len(self.action)
+
+
+@dataclass
+class EpisodeRecord:
+    """What a worker hands to the dataset writer for one seed."""
+
+    task: str
+    seed: int
+    success: bool
+    reason: str
+    instruction: str = ""
+    hidden: dict[str, Any] = field(default_factory=dict)
+    state: np.ndarray | None = None  # (T, 14) float32
+    ee_pose: np.ndarray | None = None  # (T, 14) float32
+    action: np.ndarray | None = None  # (T, 14) float32
+    subtask_index: np.ndarray | None = None  # (T,) int64
+    progress: np.ndarray | None = None  # (T,) float32
+    videos: dict[str, bytes] = field(default_factory=dict)  # camera -> mp4
+    image_stats: dict[str, dict] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def length(self) -> int:
+        return 0 if self.action is None else len(self.action)
+
+
+def _jsonable(value):
+    """Hidden variables as plain JSON values (numpy scalars and arrays included)."""
+    return json.loads(json.dumps(value, default=lambda v: v.tolist() if hasattr(v, "tolist")
+                                 else str(v)))
+
+
+class ImageStats:
+    """Per-channel statistics of a camera's frames in [0, 1], from every ``stride``-th frame
+    (the layout LeRobot uses: arrays of shape (3, 1, 1))."""
+
+    def __init__(self, stride: int = 5):
+        self.stride, self.n = stride, 0
+        self.samples: list[np.ndarray] = []
+
+    def add(self, frame: np.ndarray) -> None:
+        if self.n % self.stride == 0:
+            self.samples.append(frame[::4, ::4].reshape(-1, 3))
+        self.n += 1
+
+    def result(self) -> dict:
+        px = np.concatenate(self.samples).astype(np.float64) / 255.0
+        shape = (3, 1, 1)
+        return {"min": px.min(0).reshape(shape), "max": px.max(0).reshape(shape),
+                "mean": px.mean(0).reshape(shape), "std": px.std(0).reshape(shape),
+                "count": np.array([len(self.samples)])}
+
+
+class Recorder:
+    """Records demonstrations of one task in one process; envs are built once and reused."""
+
+    def __init__(self, task: str, spec: Spec, mode: str = "search"):
+        if mode not in SEARCH_MODES:
+            raise ValueError(f"search mode must be one of {SEARCH_MODES}, got {mode!r}")
+        self.task, self.spec, self.mode = task, spec, mode
+        self._envs: dict[bool, tuple] = {}  # rendering? -> (env, expert)
+
+    def _env(self, render: bool):
+        if render not in self._envs:
+            env = (make(self.task, render=True, cameras=self.spec.cameras, width=self.spec.width,
+                        height=self.spec.height) if render else make(self.task, render=False))
+            self._envs[render] = (env, make_expert(env))
+        return self._envs[render]
+
+    def close(self) -> None:
+        for env, _ in self._envs.values():
+            env.close()
+        self._envs.clear()
+
+    # ---------------------------------------------------------------------------------------
+    def record(self, seed: int) -> EpisodeRecord:
+        t0 = time.perf_counter()
+        if self.mode == "search":
+            traj = run_expert(*self._env(render=False), seed)
+            t1 = time.perf_counter()
+            if not traj.success:
+                return EpisodeRecord(self.task, seed, False, traj.reason,
+                                     timings={"search_s": t1 - t0})
+            encoders, stats = self._replay(seed, traj)
+            timings = {"search_s": t1 - t0, "record_s": time.perf_counter() - t1}
+        else:
+            encoders = {c: Mp4Encoder(self.spec.fps, self.spec.codec) for c in self.spec.cameras}
+            stats = {c: ImageStats() for c in self.spec.cameras}
+            traj = run_expert(*self._env(render=True), seed, encoders, stats)
+            if not traj.success:
+                return EpisodeRecord(self.task, seed, False, traj.reason,
+                                     timings={"record_s": time.perf_counter() - t0})
+            timings = {"record_s": time.perf_counter() - t0}
+        t2 = time.perf_counter()
+        videos = {c: e.finish() for c, e in encoders.items()}
+        timings["encode_flush_s"] = time.perf_counter() - t2
+        return EpisodeRecord(
+            self.task, seed, True, "success", traj.instruction, _jsonable(traj.hidden),
+            np.asarray(traj.state, np.float32), np.asarray(traj.ee_pose, np.float32),
+            np.asarray(traj.action, np.float32), np.asarray(traj.subtask, np.int64),
+            np.asarray(traj.progress, np.float32), videos,
+            {c: s.result() for c, s in stats.items()}, timings)
+
+    def _replay(self, seed: int, traj: Trajectory):
+        env, _ = self._env(render=True)
+        encoders = {c: Mp4Encoder(self.spec.fps, self.spec.codec) for c in self.spec.cameras}
+        stats = {c: ImageStats() for c in self.spec.cameras}
+        obs, info = env.reset(seed=seed)
+        for t, action in enumerate(traj.action):
+            if not np.array_equal(obs["agent_pos"], traj.state[t]):
+                raise ReplayMismatch(f"{self.task} seed {seed}: replay state differs from the "
+                                     f"searched episode at frame {t}")
+            for cam in self.spec.cameras:
+                encoders[cam].add(obs["pixels"][cam])
+                stats[cam].add(obs["pixels"][cam])
+            obs, _, terminated, truncated, info = env.step(action)
+        if not info.get("is_success"):
+            raise ReplayMismatch(f"{self.task} seed {seed}: the replay did not succeed")
+        return encoders, stats
+
+
+def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = None,
+               stats: dict[str, ImageStats] | None = None) -> Trajectory:
+    """One expert episode; frames go to ``encoders`` when the env renders."""
+    sim = env.unwrapped.sim
+    obs, info = env.reset(seed=seed)
+    expert.reset(info["instruction"], info)
+    traj = Trajectory(info["instruction"], info["hidden"])
+    progress = info["progress"]
+    while True:
+        try:
+            action = np.asarray(expert.act(obs), np.float32).astype(np.float64)
+        except Exception as err:  # an expert that cannot plan is a skipped seed, not a crash
+            traj.reason = f"expert error: {err}"
+            return traj
+        traj.state.append(obs["agent_pos"])
+        traj.ee_pose.append(sim.ee_pose())
+        traj.action.append(action)
+        traj.subtask.append(expert.subtask_index)
+        traj.progress.append(progress)
+        if encoders is not None:
+            for cam, enc in encoders.items():
+                enc.add(obs["pixels"][cam])
+                stats[cam].add(obs["pixels"][cam])
+        obs, _, terminated, truncated, info = env.step(action)
+        progress = info.get("progress", progress)
+        if terminated or truncated:
+            traj.success = bool(info.get("is_success"))
+            traj.reason = ("success" if traj.success else info.get("failure_reason")
+                           or ("timeout" if truncated else "failed"))
+            return traj

@@ -1,0 +1,282 @@
+"""Writing a dataset one committed episode at a time, and picking an interrupted one back up.
+
+An episode exists once its meta/episodes file exists. Its videos and data file are written
+first, each atomically (temporary name, then rename), and the metadata file last, so a process
+killed at any moment leaves either a whole episode or files that the next run removes. The
+dataset-wide files (info.json, stats.json, tasks.parquet, rmbench.json) are derived from the
+committed episodes and rewritten after each commit; resuming rebuilds them.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from rmbench.data import layout as L
+from rmbench.data.record import EpisodeRecord
+from rmbench.data.stats import aggregate, array_stats, to_json
+from rmbench.tasks import get_task
+from rmbench.video import write_atomic
+
+log = logging.getLogger(__name__)
+
+
+class DatasetError(ValueError):
+    """A dataset that cannot be written or read as asked; the message names the problem."""
+
+
+def write_json(path: Path, obj: Any) -> None:
+    write_atomic(path, (json.dumps(obj, indent=2) + "\n").encode())
+
+
+def write_parquet(path: Path, table: pa.Table) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        pq.write_table(table, tmp, compression="snappy")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def vector_column(x: np.ndarray) -> pa.Array:
+    """(T, D) -> a fixed-size list column, what LeRobot's readers expect for vectors."""
+    x = np.ascontiguousarray(x, np.float32)
+    return pa.FixedSizeListArray.from_arrays(pa.array(x.reshape(-1)), x.shape[1])
+
+
+def subtask_ends(subtask_index: np.ndarray) -> np.ndarray:
+    """True on the last frame of each run of one subtask label, and on the episode's last."""
+    s = np.asarray(subtask_index)
+    end = np.zeros(len(s), bool)
+    end[:-1] = s[:-1] != s[1:]
+    end[-1] = True
+    return end
+
+
+def frame_table(rec: EpisodeRecord, episode_index: int, first_index: int,
+                task_index: int, fps: int) -> pa.Table:
+    n = rec.length
+    frames = np.arange(n, dtype=np.int64)
+    cols = {
+        L.STATE: vector_column(rec.state),
+        L.EE_POSE: vector_column(rec.ee_pose),
+        L.ACTION: vector_column(rec.action),
+        L.SUBTASK_INDEX: pa.array(rec.subtask_index.astype(np.int64)),
+        L.SUBTASK_END: pa.array(subtask_ends(rec.subtask_index)),
+        L.PROGRESS: pa.array(rec.progress.astype(np.float32)),
+        "timestamp": pa.array((frames / fps).astype(np.float32)),
+        "frame_index": pa.array(frames),
+        "episode_index": pa.array(np.full(n, episode_index, np.int64)),
+        "index": pa.array(first_index + frames),
+        "task_index": pa.array(np.full(n, task_index, np.int64)),
+    }
+    return pa.table(cols)
+
+
+def episode_stats(table: pa.Table, rec: EpisodeRecord, spec: L.Spec) -> dict[str, dict]:
+    stats = {}
+    for cam in spec.cameras:
+        stats[L.image_key(cam)] = rec.image_stats[cam]
+    for name in table.column_names:
+        col = table.column(name)
+        if pa.types.is_fixed_size_list(col.type):
+            values = np.asarray(col.combine_chunks().flatten()).reshape(len(table), -1)
+        else:
+            values = np.asarray(col.to_numpy(zero_copy_only=False), np.float64)
+        stats[name] = array_stats(values)
+    return stats
+
+
+class DatasetWriter:
+    """Owns one dataset folder while a collection runs."""
+
+    def __init__(self, root: str | Path, task: str, spec: L.Spec, collection: dict[str, Any],
+                 overwrite: bool = False):
+        self.root = L.root_path(root)
+        self.task = get_task(task)
+        self.spec = spec
+        self.collection = dict(collection)
+        self.instructions = list(self.task.instructions_seen)
+        self.episodes: list[dict[str, Any]] = []  # committed rows (without stats columns)
+        self._stats: list[dict[str, dict]] = []
+        self.skipped: list[dict[str, Any]] = []
+        if overwrite and self.root.exists():
+            self._remove()
+        if (self.root / L.RMBENCH).exists():
+            self._resume()
+        elif self.root.exists() and any(self.root.iterdir()):
+            raise DatasetError(f"{self.root} exists, is not empty and holds no rmbench dataset "
+                               f"({L.RMBENCH} is missing); choose another --out")
+        self._write_dataset_meta()
+
+    # ------------------------------------------------------------------ state
+    @property
+    def num_episodes(self) -> int:
+        return len(self.episodes)
+
+    @property
+    def total_frames(self) -> int:
+        return sum(e["length"] for e in self.episodes)
+
+    @property
+    def next_seed(self) -> int:
+        """The first candidate seed not yet decided."""
+        last = max([e["rmbench/seed"] for e in self.episodes]
+                   + [s["seed"] for s in self.skipped], default=None)
+        return self.collection["seed"] if last is None else last + 1
+
+    # ----------------------------------------------------------------- commit
+    def commit(self, rec: EpisodeRecord) -> int:
+        """Write ``rec`` as the next episode; returns its episode index."""
+        if not rec.success or rec.length == 0:
+            raise ValueError(f"seed {rec.seed}: only successful demonstrations are written")
+        if rec.instruction not in self.instructions:
+            raise ValueError(f"seed {rec.seed}: instruction {rec.instruction!r} is not one of "
+                             f"the task's training instructions")
+        e = self.num_episodes
+        first = self.total_frames
+        table = frame_table(rec, e, first, self.instructions.index(rec.instruction), self.spec.fps)
+        for cam in self.spec.cameras:
+            write_atomic(self.root / L.video_file(L.image_key(cam), e), rec.videos[cam])
+        write_parquet(self.root / L.data_file(e), table)
+
+        chunk, file = L.chunk_file(e)
+        ends = subtask_ends(rec.subtask_index)
+        row: dict[str, Any] = {
+            "episode_index": e, "tasks": [rec.instruction], "length": rec.length,
+            "data/chunk_index": chunk, "data/file_index": file,
+            "dataset_from_index": first, "dataset_to_index": first + rec.length,
+        }
+        for key in self.spec.video_keys:
+            row.update({f"videos/{key}/chunk_index": chunk, f"videos/{key}/file_index": file,
+                        f"videos/{key}/from_timestamp": 0.0,
+                        f"videos/{key}/to_timestamp": rec.length / self.spec.fps})
+        row.update({
+            "meta/episodes/chunk_index": chunk, "meta/episodes/file_index": file,
+            "rmbench/task": self.task.name, "rmbench/seed": rec.seed, "rmbench/tmc": self.task.tmc,
+            "rmbench/hidden": json.dumps(rec.hidden, sort_keys=True),
+            "rmbench/key_frames": np.flatnonzero(ends).astype(np.int64).tolist(),
+            "rmbench/key_subtasks": rec.subtask_index[ends].astype(np.int64).tolist(),
+        })
+        stats = episode_stats(table, rec, self.spec)
+        stat_cols = {f"stats/{k}/{s}": [np.asarray(v).tolist()] for k, d in stats.items()
+                     for s, v in d.items()}
+        meta = pa.table({**{k: [v] for k, v in row.items()}, **stat_cols})
+        write_parquet(self.root / L.episodes_file(e), meta)  # the commit point
+        self.episodes.append(row)
+        self._stats.append(stats)
+        self._write_dataset_meta()
+        return e
+
+    def skip(self, seed: int, reason: str) -> None:
+        log.info("seed %d skipped: %s", seed, reason)
+        self.skipped.append({"seed": int(seed), "reason": reason})
+
+    def close(self) -> None:
+        self._write_dataset_meta()
+
+    # -------------------------------------------------------- derived metadata
+    def _write_dataset_meta(self) -> None:
+        n, frames = self.num_episodes, self.total_frames
+        info = {
+            "codebase_version": L.CODEBASE_VERSION, "robot_type": L.ROBOT_TYPE,
+            "total_episodes": n, "total_frames": frames, "total_tasks": len(self.instructions),
+            "chunks_size": L.CHUNKS_SIZE, "data_files_size_in_mb": 100,
+            "video_files_size_in_mb": 500, "fps": self.spec.fps,
+            "splits": {"train": f"0:{n}"}, "data_path": L.DATA_PATH, "video_path": L.VIDEO_PATH,
+            "features": self.spec.features(),
+        }
+        tasks = pd.DataFrame({"task_index": np.arange(len(self.instructions), dtype=np.int64)},
+                             index=pd.Index(self.instructions, name="task"))
+        write_parquet(self.root / L.TASKS, pa.Table.from_pandas(tasks))
+        write_parquet(self.root / L.SUBTASKS, pa.table({
+            "subtask_index": np.arange(len(self.task.subtasks), dtype=np.int64),
+            "subtask": list(self.task.subtasks)}))
+        write_json(self.root / L.STATS, to_json(aggregate(self._stats)))
+        write_json(self.root / L.RMBENCH, {
+            "format": L.FORMAT, "task": self.task.name, "gym_id": self.task.gym_id,
+            "tmc": self.task.tmc, "step_limit": self.task.step_limit,
+            "subtasks": list(self.task.subtasks), "collection": self.collection,
+            "episodes": n, "skipped": self.skipped})
+        write_json(self.root / L.INFO, info)  # last: a reader sees counts that match the files
+
+    # ----------------------------------------------------------------- resume
+    def _resume(self) -> None:
+        try:
+            saved = json.loads((self.root / L.RMBENCH).read_text())
+        except (OSError, json.JSONDecodeError) as err:
+            raise DatasetError(f"{self.root / L.RMBENCH} is unreadable ({err}); pass --overwrite "
+                               f"to start over") from err
+        old = saved.get("collection", {})
+        diff = [k for k in sorted(set(old) | set(self.collection))
+                if old.get(k) != self.collection.get(k)]
+        if diff:
+            what = ", ".join(f"{k} {old.get(k)!r} there, {self.collection.get(k)!r} asked" for k in diff)
+            raise DatasetError(f"{self.root} was collected with other arguments ({what}); run "
+                               f"with the same arguments to resume, or --overwrite to start over")
+        index = _committed_episode_files(self.root)
+        for e, path in enumerate(index):
+            table = pq.read_table(path)
+            row = {k: v[0] for k, v in table.to_pydict().items()}
+            stats: dict[str, dict] = {}
+            for col in [c for c in row if c.startswith("stats/")]:
+                _, key, stat = col.split("/")  # feature names hold no "/"
+                stats.setdefault(key, {})[stat] = np.asarray(row.pop(col))
+            self.episodes.append(row)
+            self._stats.append(stats)
+        last_seed = self.episodes[-1]["rmbench/seed"] if self.episodes else -1
+        self.skipped = [s for s in saved.get("skipped", []) if s["seed"] < last_seed]
+        removed = self._remove_uncommitted()
+        if removed:
+            log.warning("removed %d file(s) of an interrupted episode in %s", removed, self.root)
+        log.info("resuming %s at episode %d", self.root, self.num_episodes)
+
+    def _remove_uncommitted(self) -> int:
+        """Delete temporary files and the data/videos of episodes that were never committed."""
+        n, removed = self.num_episodes, 0
+        for sub in ("data", "videos", L.EPISODES_DIR):
+            for path in (self.root / sub).rglob("*") if (self.root / sub).exists() else []:
+                if not path.is_file():
+                    continue
+                e = _episode_of(path)
+                if path.name.startswith(".") or e is None or e >= n:
+                    path.unlink()
+                    removed += 1
+        return removed
+
+    def _remove(self) -> None:
+        if any(self.root.iterdir()) and not (self.root / L.RMBENCH).exists():
+            raise DatasetError(f"refusing to delete {self.root}: it is not an rmbench dataset")
+        shutil.rmtree(self.root)
+
+
+_FILE = re.compile(r"chunk-(\d+)[/\\]file-(\d+)\.(parquet|mp4)$")
+
+
+def _episode_of(path: Path) -> int | None:
+    m = _FILE.search(path.as_posix())
+    return None if m is None else int(m.group(1)) * L.CHUNKS_SIZE + int(m.group(2))
+
+
+def _committed_episode_files(root: Path) -> list[Path]:
+    """meta/episodes files of episodes 0, 1, ... up to the first gap."""
+    found = {}
+    for path in (root / L.EPISODES_DIR).glob("chunk-*/file-*.parquet"):
+        e = _episode_of(path)
+        if e is not None:
+            found[e] = path
+    out = []
+    while len(out) in found:
+        out.append(found[len(out)])
+    return out
