@@ -71,6 +71,47 @@ def cmd_quickstart(args) -> int:
     return 0 if summary["all_succeeded"] else 1
 
 
+def _resolution(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"resolution must look like 320x240, got {text!r}") from None
+    return w, h
+
+
+def cmd_collect(args) -> int:
+    from rmbench.data import CollectConfig, collect
+
+    width, height = args.resolution
+    kwargs = {"cameras": tuple(args.cameras)} if args.cameras else {}
+    cfg = CollectConfig(args.task, args.out, episodes=args.episodes, seed=args.seed,
+                        width=width, height=height, workers=args.workers, search=args.search,
+                        backend=args.backend, overwrite=args.overwrite,
+                        progress=not args.json, **kwargs)
+    summary = collect(cfg)
+    if args.json:
+        print(json.dumps(summary.to_dict(), indent=2))
+    else:
+        print(f"{summary.task}: {summary.episodes} episodes ({summary.new_episodes} new, "
+              f"{summary.frames} frames) in {summary.root}; {len(summary.skipped)} seed(s) "
+              f"skipped; {summary.demos_per_min:.1f} demos/min")
+        for s in summary.skipped:
+            print(f"  skipped seed {s['seed']}: {s['reason']}")
+    return 0
+
+
+def cmd_dataset_check(args) -> int:
+    from rmbench.data.check import check_dataset
+
+    summary = check_dataset(args.dir)
+    if args.json:
+        print(json.dumps({"ok": True, **summary}, indent=2))
+    else:
+        print(f"ok: {summary['episodes']} episodes, {summary['frames']} frames of "
+              f"{summary['task']}, cameras {', '.join(summary['cameras'])}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmbench", description="RMBench: memory-dependent "
                                      "dual-arm manipulation on MuJoCo")
@@ -91,6 +132,32 @@ def build_parser() -> argparse.ArgumentParser:
     _add_json(p)
     p.set_defaults(func=cmd_expert)
 
+    p = sub.add_parser("collect", help="record expert demonstrations into a LeRobot v3.0 dataset")
+    p.add_argument("task", help="task name or gym id (see `rmbench tasks`)")
+    p.add_argument("--episodes", type=int, default=50, help="demonstrations wanted in all")
+    p.add_argument("--seed", type=int, default=0, help="first candidate seed, in [0, 100000) "
+                   "(evaluation uses 100000 and up)")
+    p.add_argument("--out", required=True, help="dataset folder (resumed if it exists)")
+    p.add_argument("--workers", type=int, default=1, help="local worker processes")
+    p.add_argument("--cameras", nargs="+", metavar="CAM",
+                   help="cameras to record (default: head left_wrist right_wrist)")
+    p.add_argument("--resolution", type=_resolution, default=(320, 240), metavar="WxH")
+    p.add_argument("--search", choices=["search", "direct"], default="search",
+                   help="search: solve each seed without rendering, then record a replay; "
+                   "direct: record while solving, drop failures")
+    p.add_argument("--backend", choices=["local", "ray"], default="local",
+                   help="ray: spread episodes over a Ray cluster (pip install 'rmbench[ray]')")
+    p.add_argument("--overwrite", action="store_true", help="delete the dataset in --out first")
+    _add_json(p)
+    p.set_defaults(func=cmd_collect)
+
+    p = sub.add_parser("dataset", help="dataset tools")
+    dsub = p.add_subparsers(dest="dataset_command", required=True)
+    c = dsub.add_parser("check", help="validate every file of a dataset; report the first problem")
+    c.add_argument("dir")
+    _add_json(c)
+    c.set_defaults(func=cmd_dataset_check)
+
     p = sub.add_parser("quickstart", help="expert on every task for a few seeds, with videos")
     p.add_argument("--out", default="runs/quickstart", help="output folder")
     p.add_argument("--episodes", type=int, default=3)
@@ -109,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return args.func(args)
-    except (UnknownTaskError, ValueError) as err:
+    except (UnknownTaskError, ValueError, RuntimeError) as err:
         print(f"rmbench: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -62,7 +62,7 @@ class CollectConfig:
         unknown = sorted(set(self.cameras) - set(StationConfig().cameras))
         if unknown:
             raise ValueError(f"unknown camera(s) {unknown}; cameras: {list(StationConfig().cameras)}")
-        self.spec  # validates the resolution
+        L.Spec(self.cameras, self.width, self.height)  # validates the resolution
 
     @property
     def spec(self) -> L.Spec:
@@ -176,7 +176,6 @@ def collect(cfg: CollectConfig) -> CollectSummary:
     if start_episodes > cfg.episodes:
         raise ValueError(f"{cfg.out} already holds {start_episodes} episodes, more than the "
                          f"{cfg.episodes} asked; ask for at least {start_episodes}")
-    need = cfg.episodes - start_episodes
     max_attempts = cfg.max_attempts or 10 * cfg.episodes + 20
     attempts = writer.num_episodes + len(writer.skipped)
     if cfg.backend == "ray":

@@ -16,7 +16,7 @@ from rmbench.sim.simulator import ACTION_DIM, EE_POSE_DIM
 from rmbench.video import VideoCodec
 
 CODEBASE_VERSION = "v3.0"
-FORMAT = "rmbench/1"  # rmbench's own metadata (meta/rmbench.json, meta/subtasks.parquet)
+FORMAT = "rmbench/1"  # rmbench's own metadata (meta/rmbench.json)
 ROBOT_TYPE = "aloha"  # two ViperX 300s arms, the gym-aloha layout
 CHUNKS_SIZE = 1000
 

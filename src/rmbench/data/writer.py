@@ -200,9 +200,11 @@ class DatasetWriter:
         tasks = pd.DataFrame({"task_index": np.arange(len(self.instructions), dtype=np.int64)},
                              index=pd.Index(self.instructions, name="task"))
         write_parquet(self.root / L.TASKS, pa.Table.from_pandas(tasks))
-        write_parquet(self.root / L.SUBTASKS, pa.table({
-            "subtask_index": np.arange(len(self.task.subtasks), dtype=np.int64),
-            "subtask": list(self.task.subtasks)}))
+        # LeRobot's own subtask table: text as the index, so a frame's ``subtask_index``
+        # gives ``item["subtask"]`` in LeRobotDataset.
+        subtasks = pd.DataFrame({"subtask_index": np.arange(len(self.task.subtasks), dtype=np.int64)},
+                                index=pd.Index(list(self.task.subtasks), name="subtask"))
+        write_parquet(self.root / L.SUBTASKS, pa.Table.from_pandas(subtasks))
         write_json(self.root / L.STATS, to_json(aggregate(self._stats)))
         write_json(self.root / L.RMBENCH, {
             "format": L.FORMAT, "task": self.task.name, "gym_id": self.task.gym_id,
@@ -225,8 +227,7 @@ class DatasetWriter:
             what = ", ".join(f"{k} {old.get(k)!r} there, {self.collection.get(k)!r} asked" for k in diff)
             raise DatasetError(f"{self.root} was collected with other arguments ({what}); run "
                                f"with the same arguments to resume, or --overwrite to start over")
-        index = _committed_episode_files(self.root)
-        for e, path in enumerate(index):
+        for path in _committed_episode_files(self.root):
             table = pq.read_table(path)
             row = {k: v[0] for k, v in table.to_pydict().items()}
             stats: dict[str, dict] = {}

@@ -1,0 +1,128 @@
+"""``rmbench dataset check``: every file of a dataset against the layout; the first problem in
+one line. Checks what a reader relies on, without decoding video (headers are read instead)."""
+
+from __future__ import annotations
+
+import av
+import numpy as np
+import pyarrow as pa
+
+from rmbench.data import layout as L
+from rmbench.data.reader import Dataset, column, read_json, read_parquet
+from rmbench.data.writer import DatasetError, subtask_ends
+from rmbench.video import probe_video
+
+REQUIRED_INFO = ("codebase_version", "robot_type", "total_episodes", "total_frames",
+                 "total_tasks", "chunks_size", "fps", "splits", "data_path", "video_path",
+                 "features")
+ARROW_TYPES = {"float32": pa.float32(), "int64": pa.int64(), "bool": pa.bool_()}
+
+
+def _fail(msg: str):
+    raise DatasetError(msg)
+
+
+def check_dataset(root) -> dict:
+    """Raise DatasetError naming the first problem; return a summary when all is well."""
+    ds = Dataset(root)  # info.json, rmbench.json, tasks and subtasks tables
+    root = ds.root
+    info = ds.info
+    for key in REQUIRED_INFO:
+        if key not in info:
+            _fail(f"{root / L.INFO}: no {key!r}")
+    if info["data_path"] != L.DATA_PATH or info["video_path"] != L.VIDEO_PATH:
+        _fail(f"{root / L.INFO}: data_path/video_path differ from the v3.0 layout")
+    if len(ds.instructions) != info["total_tasks"]:
+        _fail(f"{root / L.TASKS}: {len(ds.instructions)} tasks, info.json says {info['total_tasks']}")
+    stats = read_json(root / L.STATS)
+    features = info["features"]
+    for key in features:
+        if info["total_episodes"] and key not in stats:
+            _fail(f"{root / L.STATS}: no statistics for {key!r}")
+
+    found = sorted(p.relative_to(root).as_posix() for p in (root / L.EPISODES_DIR).rglob("*.parquet"))
+    expected = [L.episodes_file(e) for e in range(ds.num_episodes)]
+    if found != expected:
+        extra = sorted(set(found) - set(expected))
+        missing = sorted(set(expected) - set(found))
+        _fail(f"{root / L.EPISODES_DIR}: "
+              + (f"missing {missing[0]}" if missing else f"{extra[0]} beyond the "
+                 f"{ds.num_episodes} episodes in info.json (an interrupted collection: re-run it "
+                 f"to resume)"))
+
+    first = 0
+    for e in range(ds.num_episodes):
+        row = ds.episodes[e]
+        where = root / L.episodes_file(e)
+        if row["episode_index"] != e:
+            _fail(f"{where}: episode_index {row['episode_index']}, expected {e}")
+        n = row["length"]
+        if (row["dataset_from_index"], row["dataset_to_index"]) != (first, first + n):
+            _fail(f"{where}: dataset index range [{row['dataset_from_index']}, "
+                  f"{row['dataset_to_index']}) should be [{first}, {first + n})")
+        ends = _check_data(root / L.data_file(e), features, e, n, first, ds)
+        key_frames = list(row["rmbench/key_frames"])
+        if key_frames != np.flatnonzero(ends).tolist():
+            _fail(f"{where}: key frames {key_frames[:5]}... do not match the subtask_end flags")
+        for cam in ds.cameras:
+            _check_video(ds.video_path(cam, e), n, features[L.image_key(cam)])
+        first += n
+    if first != ds.num_frames:
+        _fail(f"{root / L.INFO}: total_frames {ds.num_frames}, the episodes hold {first}")
+    return {"root": str(root), "task": ds.task, "episodes": ds.num_episodes, "frames": first,
+            "cameras": ds.cameras}
+
+
+def _check_data(path, features, e, n, first, ds) -> np.ndarray:
+    """The data file of episode ``e``; returns its subtask_end flags."""
+    table = read_parquet(path)
+    expected_cols = [k for k, f in features.items() if f["dtype"] != "video"]
+    if table.column_names != expected_cols:
+        missing = sorted(set(expected_cols) - set(table.column_names))
+        extra = sorted(set(table.column_names) - set(expected_cols))
+        _fail(f"{path}: columns differ from info.json (missing {missing}, extra {extra})")
+    if len(table) != n:
+        _fail(f"{path}: {len(table)} rows, the episode's length is {n}")
+    for key in expected_cols:
+        ft, typ = features[key], table.schema.field(key).type
+        want = ARROW_TYPES[ft["dtype"]]
+        if ft["shape"] == [1]:
+            ok = typ == want
+        else:
+            ok = pa.types.is_fixed_size_list(typ) and typ.list_size == ft["shape"][0] \
+                and typ.value_type == want
+        if not ok:
+            _fail(f"{path}: column {key!r} has type {typ}, info.json declares "
+                  f"{ft['dtype']} {ft['shape']}")
+    for key in (L.STATE, L.ACTION, L.EE_POSE):
+        if not np.isfinite(column(table, key)).all():
+            _fail(f"{path}: {key} holds NaN or inf")
+    checks = {
+        "episode_index": np.full(n, e), "frame_index": np.arange(n),
+        "index": first + np.arange(n), "timestamp": (np.arange(n) / ds.fps).astype(np.float32)}
+    for key, want in checks.items():
+        if not np.array_equal(column(table, key), want):
+            _fail(f"{path}: {key} is not {want[:3].tolist()}... as it should be for episode {e}")
+    if not np.isin(column(table, "task_index"), np.arange(len(ds.instructions))).all():
+        _fail(f"{path}: task_index outside the {len(ds.instructions)} tasks of {L.TASKS}")
+    sub = column(table, L.SUBTASK_INDEX)
+    if not np.isin(sub, np.arange(len(ds.subtasks))).all():
+        _fail(f"{path}: subtask_index outside the {len(ds.subtasks)} subtasks of {L.SUBTASKS}")
+    ends = column(table, L.SUBTASK_END).astype(bool)
+    if not np.array_equal(ends, subtask_ends(sub)):
+        _fail(f"{path}: subtask_end flags do not mark the last frame of each subtask")
+    return ends
+
+
+def _check_video(path, n, feature) -> None:
+    if not path.exists():
+        _fail(f"{path}: missing")
+    try:
+        meta = probe_video(path)
+    except (av.FFmpegError, ValueError) as err:
+        _fail(f"{path}: not a readable video ({err})")
+    if meta["frames"] != n:
+        _fail(f"{path}: {meta['frames']} frames, the episode has {n}")
+    h, w, _ = feature["shape"]
+    if (meta["height"], meta["width"]) != (h, w):
+        _fail(f"{path}: {meta['width']}x{meta['height']}, info.json declares {w}x{h}")

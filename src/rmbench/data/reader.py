@@ -1,0 +1,160 @@
+"""Reading an rmbench dataset: metadata, and whole episodes with their frames decoded (PyAV)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import av
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from rmbench.data import layout as L
+from rmbench.data.writer import DatasetError
+from rmbench.video import decode_video
+
+VECTOR_KEYS = (L.STATE, L.EE_POSE, L.ACTION)
+
+
+@dataclass
+class Episode:
+    """One demonstration, one row per frame (the observation and the action taken there)."""
+
+    index: int
+    seed: int
+    task: str
+    instruction: str
+    tmc: str
+    hidden: dict[str, Any]
+    state: np.ndarray  # (T, 14) float32
+    ee_pose: np.ndarray  # (T, 14) float32
+    action: np.ndarray  # (T, 14) float32
+    subtask_index: np.ndarray  # (T,) int64
+    subtask_end: np.ndarray  # (T,) bool
+    progress: np.ndarray  # (T,) float32
+    timestamp: np.ndarray  # (T,) float32
+    key_frames: list[int]
+    subtasks: list[str]  # the dataset's subtask table: text of each subtask index
+    frames: dict[str, np.ndarray] = field(default_factory=dict)  # camera -> (T, H, W, 3) uint8
+
+    def __len__(self) -> int:
+        return len(self.action)
+
+    def subtask_text(self, t: int) -> str:
+        return self.subtasks[int(self.subtask_index[t])]
+
+
+def read_parquet(path: Path) -> pa.Table:
+    try:
+        return pq.read_table(path)
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: missing") from None
+    except (pa.ArrowException, OSError) as err:
+        raise DatasetError(f"{path}: not a readable parquet file ({err})") from None
+
+
+def read_json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: missing") from None
+    except (OSError, json.JSONDecodeError) as err:
+        raise DatasetError(f"{path}: not readable JSON ({err})") from None
+
+
+def column(table: pa.Table, name: str) -> np.ndarray:
+    col = table.column(name).combine_chunks()
+    if pa.types.is_fixed_size_list(col.type) or pa.types.is_list(col.type):
+        return np.asarray(col.flatten()).reshape(len(table), -1)
+    return col.to_numpy(zero_copy_only=False)
+
+
+class Dataset:
+    """An rmbench dataset folder. ``episode(i)`` loads one episode; frames are decoded only
+    for the cameras asked for."""
+
+    def __init__(self, root: str | Path):
+        self.root = L.root_path(root)
+        if not self.root.is_dir():
+            raise DatasetError(f"{self.root}: no such dataset folder")
+        self.info = read_json(self.root / L.INFO)
+        if self.info.get("codebase_version") != L.CODEBASE_VERSION:
+            raise DatasetError(f"{self.root / L.INFO}: codebase_version "
+                               f"{self.info.get('codebase_version')!r}, expected {L.CODEBASE_VERSION!r}")
+        self.rmbench = read_json(self.root / L.RMBENCH)
+        self.features: dict[str, dict] = self.info["features"]
+        self.fps: int = self.info["fps"]
+        self.cameras = [k[len(L.IMAGE_PREFIX):] for k, f in self.features.items()
+                        if f["dtype"] == "video"]
+        tasks = read_parquet(self.root / L.TASKS).to_pandas()
+        self.instructions: list[str] = [str(t) for t in tasks.sort_values("task_index").index]
+        subtasks = read_parquet(self.root / L.SUBTASKS).to_pandas()
+        self.subtasks: list[str] = [str(s) for s in subtasks.sort_values("subtask_index").index]
+
+    @property
+    def task(self) -> str:
+        return self.rmbench["task"]
+
+    @property
+    def num_episodes(self) -> int:
+        return int(self.info["total_episodes"])
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.info["total_frames"])
+
+    def __len__(self) -> int:
+        return self.num_episodes
+
+    @cached_property
+    def episodes(self) -> list[dict[str, Any]]:
+        """Each episode's meta/episodes row, without its statistics columns."""
+        rows = []
+        for e in range(self.num_episodes):
+            table = read_parquet(self.root / L.episodes_file(e))
+            table = table.select([c for c in table.column_names if not c.startswith("stats/")])
+            rows.append({k: v[0] for k, v in table.to_pydict().items()})
+        return rows
+
+    @cached_property
+    def lengths(self) -> np.ndarray:
+        return np.array([row["length"] for row in self.episodes], dtype=np.int64)
+
+    def video_path(self, camera: str, episode: int) -> Path:
+        return self.root / L.video_file(L.image_key(camera), episode)
+
+    def episode(self, index: int, cameras: list[str] | tuple[str, ...] | None = None) -> Episode:
+        """Episode ``index`` with frames of ``cameras`` (all by default; ``[]`` for none)."""
+        if not 0 <= index < self.num_episodes:
+            raise IndexError(f"episode {index} out of range: the dataset has {self.num_episodes}")
+        cameras = self.cameras if cameras is None else list(cameras)
+        unknown = sorted(set(cameras) - set(self.cameras))
+        if unknown:
+            raise DatasetError(f"camera(s) {unknown} not in the dataset; it has {self.cameras}")
+        row = self.episodes[index]
+        table = read_parquet(self.root / L.data_file(index))
+        ep = Episode(
+            index=index, seed=int(row["rmbench/seed"]), task=row["rmbench/task"],
+            instruction=row["tasks"][0], tmc=row["rmbench/tmc"],
+            hidden=json.loads(row["rmbench/hidden"]),
+            state=column(table, L.STATE), ee_pose=column(table, L.EE_POSE),
+            action=column(table, L.ACTION), subtask_index=column(table, L.SUBTASK_INDEX),
+            subtask_end=column(table, L.SUBTASK_END).astype(bool),
+            progress=column(table, L.PROGRESS), timestamp=column(table, "timestamp"),
+            key_frames=list(row["rmbench/key_frames"]), subtasks=self.subtasks)
+        for cam in cameras:
+            path = self.video_path(cam, index)
+            if not path.exists():
+                raise DatasetError(f"{path}: missing")
+            try:
+                frames = decode_video(path)
+            except (av.FFmpegError, ValueError) as err:
+                raise DatasetError(f"{path}: not a readable video ({err})") from None
+            if len(frames) != len(ep):
+                raise DatasetError(f"{path}: {len(frames)} frames, the episode has {len(ep)}")
+            ep.frames[cam] = frames
+        return ep

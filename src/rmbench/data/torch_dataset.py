@@ -1,0 +1,155 @@
+"""PyTorch access for training: frames with action chunks, in-order sampling for memory
+policies, and a disk cache of decoded, resized frames so that epochs after the first do not
+decode video again."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch.utils.data import Sampler
+
+from rmbench.data import layout as L
+from rmbench.data.reader import Dataset
+
+
+class FrameCache:
+    """Decoded frames of each (episode, camera), resized to ``size`` = (height, width), stored as
+    .npy files and memory-mapped. Dataset episodes never change once written; the video file's
+    size and modification time are part of the cache name all the same, so a dataset collected
+    anew into the same folder cannot be served stale frames."""
+
+    def __init__(self, dataset: Dataset, size: tuple[int, int] | None = None,
+                 cache_dir: str | Path | None = None):
+        self.ds = dataset
+        self.size = tuple(size) if size is not None else None
+        tag = "native" if self.size is None else f"{self.size[1]}x{self.size[0]}"
+        self.dir = Path(cache_dir) if cache_dir is not None else dataset.root / ".cache" / f"frames-{tag}"
+        self._open: dict[tuple[int, str], np.ndarray] = {}
+
+    def _path(self, episode: int, camera: str) -> Path:
+        st = self.ds.video_path(camera, episode).stat()
+        return self.dir / camera / f"episode-{episode:06d}-{st.st_size}-{st.st_mtime_ns}.npy"
+
+    def frames(self, episode: int, camera: str) -> np.ndarray:
+        """(T, H, W, 3) uint8, memory-mapped."""
+        key = (episode, camera)
+        if key not in self._open:
+            path = self._path(episode, camera)
+            if not path.exists():
+                frames = self.ds.episode(episode, cameras=[camera]).frames[camera]
+                if self.size is not None and frames.shape[1:3] != self.size:
+                    frames = resize(frames, self.size)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npy")
+                np.save(tmp, frames)
+                os.replace(tmp, path)
+            self._open[key] = np.load(path, mmap_mode="r")
+        return self._open[key]
+
+
+def resize(frames: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """(T, H, W, 3) uint8 -> (T, h, w, 3) uint8, antialiased bilinear."""
+    x = torch.from_numpy(np.ascontiguousarray(frames)).permute(0, 3, 1, 2).float()
+    y = F.interpolate(x, size=size, mode="bilinear", antialias=True, align_corners=False)
+    return y.round().clamp(0, 255).to(torch.uint8).permute(0, 2, 3, 1).numpy()
+
+
+class DemoDataset(torch.utils.data.Dataset):
+    """Frame ``i`` of the dataset (episodes concatenated) with the next ``chunk`` actions.
+
+    An item holds ``observation.state`` (14,) float32, ``observation.images.<camera>`` (3, H, W)
+    uint8, ``action`` (chunk, 14) float32 with ``action_is_pad`` (chunk,) where the chunk runs
+    past the episode's end (padded with its last action), and ``subtask_index``,
+    ``subtask_end``, ``task_index``, ``episode_index``, ``frame_index``, ``episode_start``.
+    """
+
+    def __init__(self, root: str | Path | Dataset, *, chunk: int = 30,
+                 cameras: list[str] | None = None, image_size: tuple[int, int] | None = None,
+                 episodes: list[int] | None = None, cache_dir: str | Path | None = None):
+        self.ds = root if isinstance(root, Dataset) else Dataset(root)
+        if chunk < 1:
+            raise ValueError(f"chunk must be at least 1, got {chunk}")
+        self.chunk = chunk
+        self.cameras = list(self.ds.cameras if cameras is None else cameras)
+        self.episode_ids = list(range(self.ds.num_episodes) if episodes is None else episodes)
+        self.cache = FrameCache(self.ds, image_size, cache_dir)
+        self.low_dim = [self.ds.episode(e, cameras=[]) for e in self.episode_ids]
+        lengths = np.array([len(ep) for ep in self.low_dim], dtype=np.int64)
+        self.starts = np.concatenate([[0], np.cumsum(lengths)])
+        self.lengths = lengths
+
+    def __len__(self) -> int:
+        return int(self.starts[-1])
+
+    def locate(self, i: int) -> tuple[int, int]:
+        """Flat index -> (position in ``episode_ids``, frame)."""
+        if not 0 <= i < len(self):
+            raise IndexError(f"index {i} out of range for {len(self)} frames")
+        k = int(np.searchsorted(self.starts, i, side="right") - 1)
+        return k, int(i - self.starts[k])
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        k, t = self.locate(int(i))
+        ep = self.low_dim[k]
+        n = len(ep)
+        idx = np.minimum(np.arange(t, t + self.chunk), n - 1)
+        item = {
+            L.STATE: torch.from_numpy(ep.state[t].copy()),
+            L.ACTION: torch.from_numpy(ep.action[idx].copy()),
+            "action_is_pad": torch.from_numpy(np.arange(t, t + self.chunk) >= n),
+            L.SUBTASK_INDEX: torch.tensor(int(ep.subtask_index[t])),
+            L.SUBTASK_END: torch.tensor(bool(ep.subtask_end[t])),
+            "task_index": torch.tensor(self.ds.instructions.index(ep.instruction)),
+            "episode_index": torch.tensor(ep.index),
+            "frame_index": torch.tensor(t),
+            "episode_start": torch.tensor(t == 0),
+        }
+        for cam in self.cameras:
+            frame = self.cache.frames(self.episode_ids[k], cam)[t]
+            item[L.image_key(cam)] = torch.from_numpy(np.array(frame)).permute(2, 0, 1)
+        return item
+
+
+class EpisodeOrderSampler(Sampler[list[int]]):
+    """Batches for memory policies: slot ``b`` of every batch continues one episode frame by
+    frame, so a per-slot memory carried across batches is what the policy would hold at run
+    time. When a slot's episode ends the slot starts the next episode of a shuffled queue (its
+    first item has ``episode_start`` set: clear the slot's memory there). Batches mix episodes at
+    different time steps. Deterministic for a given ``seed`` and epoch (``set_epoch``)."""
+
+    def __init__(self, dataset: DemoDataset, batch_size: int, shuffle: bool = True, seed: int = 0):
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+        self.starts, self.lengths = dataset.starts[:-1], dataset.lengths
+        self.batch_size, self.shuffle, self.seed, self.epoch = batch_size, shuffle, seed, 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = epoch
+
+    def __len__(self) -> int:
+        return int(self.lengths.sum()) // self.batch_size
+
+    def __iter__(self) -> Iterator[list[int]]:
+        rng = np.random.default_rng([self.seed, self.epoch])
+        n = len(self.lengths)
+
+        def queue():
+            while True:
+                yield from (rng.permutation(n) if self.shuffle else range(n))
+
+        episodes = queue()
+        slots = [[int(next(episodes)), 0] for _ in range(self.batch_size)]
+        for _ in range(len(self)):
+            batch = []
+            for slot in slots:
+                e, t = slot
+                batch.append(int(self.starts[e] + t))
+                slot[1] += 1
+                if slot[1] >= self.lengths[e]:
+                    slot[0], slot[1] = int(next(episodes)), 0
+            yield batch
