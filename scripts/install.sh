@@ -47,7 +47,7 @@ if ! .venv/bin/python -c "import torch, sys; sys.exit(torch.__version__.split('+
   fi
   rm -rf "$tmp"
 fi
-echo "[install] rmbench[test]"
-"${PIP[@]}" install -q -e ".[test]"
+echo "[install] rmbench[test,train]"
+"${PIP[@]}" install -q -e ".[test,train]"
 .venv/bin/python -c "import rmbench, torch; assert not torch.version.cuda, 'a CUDA torch was installed'"
 echo "[install] done: .venv/bin/rmbench --help"

@@ -1,6 +1,23 @@
 import pytest
 
 import rmbench
+from rmbench.data import CollectConfig, collect
+
+DATA_TASK = "observe_and_pickup"  # the shortest episodes
+
+
+def small_collection(out, **kw) -> CollectConfig:
+    """Three demonstrations at 64x48 from two cameras: a dataset in a few seconds."""
+    args = {"episodes": 3, "seed": 0, "cameras": ("head", "left_wrist"), "width": 64,
+            "height": 48, "progress": False, **kw}
+    return CollectConfig(DATA_TASK, out, **args)
+
+
+@pytest.fixture(scope="session")
+def dataset(tmp_path_factory):
+    out = tmp_path_factory.mktemp("data") / "ds"
+    collect(small_collection(out))
+    return out
 
 
 @pytest.fixture(params=sorted(rmbench.TASKS))

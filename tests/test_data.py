@@ -20,20 +20,8 @@ from rmbench.data.reader import Dataset
 from rmbench.data.record import run_expert
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
-
-TASK = "observe_and_pickup"  # the shortest episodes
-SMALL = {"cameras": ("head", "left_wrist"), "width": 64, "height": 48, "progress": False}
-
-
-def small(out, **kw) -> CollectConfig:
-    return CollectConfig(TASK, out, **{"episodes": 3, "seed": 0, **SMALL, **kw})
-
-
-@pytest.fixture(scope="module")
-def dataset(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("data") / "ds"
-    collect(small(out))
-    return out
+from tests.conftest import DATA_TASK as TASK
+from tests.conftest import small_collection as small
 
 
 def copy(src: Path, tmp_path: Path) -> Path:
