@@ -213,3 +213,10 @@ def test_lerobot_reads_the_dataset(dataset):
     ep = ours.episode(1, cameras=[])
     np.testing.assert_array_equal(item["action"].numpy(), ep.action[5])
     assert item["subtask"] == ep.subtask_text(5) and item["task"] == ep.instruction
+
+
+def test_ray_backend_gives_the_same_dataset(dataset, tmp_path):
+    pytest.importorskip("ray")
+    out = tmp_path / "ds"
+    collect(small(out, workers=2, backend="ray"))
+    assert contents(out) == contents(dataset)

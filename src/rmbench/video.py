@@ -18,12 +18,13 @@ import numpy as np
 
 @dataclass(frozen=True)
 class VideoCodec:
-    """Encoder settings. ``ultrafast`` keeps encoding well under the cost of rendering; a GOP
+    """Encoder settings. ``veryfast`` at CRF 23 measured 0.7 MB for 3 x 300 frames at 320x240
+    (``ultrafast`` CRF 18: 2.2 MB) with a mean error under 2/255, at about 1 ms per frame. A GOP
     of one second (20 frames) bounds the decode work of a random seek for frame-level readers
     such as LeRobot's."""
 
-    crf: int = 18
-    preset: str = "ultrafast"
+    crf: int = 23
+    preset: str = "veryfast"
     gop: int = 20
     codec: str = "libx264"
     pix_fmt: str = "yuv420p"
