@@ -54,7 +54,7 @@ def test_round_trip_matches_a_fresh_rollout(dataset):
         if t in (0, len(ep) // 2, len(ep) - 1):
             for cam in ds.cameras:
                 err = np.abs(ep.frames[cam][t].astype(int) - obs["pixels"][cam].astype(int)).mean()
-                assert err < 4.0, (cam, t, err)
+                assert err < 6.0, (cam, t, err)  # H.264 CRF 23 on 64x48 frames
         obs, *_ = env.step(ep.action[t].astype(np.float64))
     env.close()
     # Subtask ends: last frame of each label run; key frames are exactly those frames.
@@ -220,3 +220,20 @@ def test_ray_backend_gives_the_same_dataset(dataset, tmp_path):
     out = tmp_path / "ds"
     collect(small(out, workers=2, backend="ray"))
     assert contents(out) == contents(dataset)
+
+
+def test_cli_check_and_collect_errors_are_one_line(dataset, tmp_path, capsys):
+    from rmbench.cli.main import main
+
+    assert main(["dataset", "check", str(dataset)]) == 0
+    assert capsys.readouterr().out.startswith("ok: 3 episodes")
+    root = copy(dataset, tmp_path)
+    (root / L.data_file(0)).write_bytes(b"")
+    assert main(["dataset", "check", str(root)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "file-000.parquet" in err
+    assert main(["collect", TASK, "--out", str(root), "--seed", "5", "--episodes", "3"]) == 2
+    assert "other arguments" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:  # argparse's own usage error
+        main(["collect", TASK, "--out", str(tmp_path / "x"), "--resolution", "320by240"])
+    assert exit_.value.code == 2 and "resolution must look like 320x240" in capsys.readouterr().err
