@@ -10,9 +10,7 @@ from __future__ import annotations
 import logging
 import time
 from collections import deque
-from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 
 from tqdm import tqdm
@@ -20,12 +18,12 @@ from tqdm import tqdm
 from rmbench.data import layout as L
 from rmbench.data.record import SEARCH_MODES, EpisodeRecord, Recorder
 from rmbench.data.writer import DatasetWriter
+from rmbench.parallel import BACKENDS, make_executor
 from rmbench.seeds import TRAIN_SEED_END, check_training_seed
 from rmbench.sim.station import StationConfig
 from rmbench.tasks import get_task
 
 log = logging.getLogger(__name__)
-BACKENDS = ("local", "ray")
 
 
 @dataclass(frozen=True)
@@ -103,69 +101,11 @@ def _record(task: str, spec: L.Spec, mode: str, seed: int) -> EpisodeRecord:
     return _RECORDER.record(seed)
 
 
-class _Deferred:
-    """A job of the in-process executor: it runs when its result is asked for, in order."""
-
-    def __init__(self, fn, args):
-        self.fn, self.args = fn, args
-
-    def result(self):
-        return self.fn(*self.args)
-
-
-class _Inline:
-    """One worker: jobs run in this process, one at a time."""
-
-    def submit(self, fn, *args) -> _Deferred:
-        return _Deferred(fn, args)
-
-    def shutdown(self) -> None:
-        global _RECORDER
-        if _RECORDER is not None:
-            _RECORDER.close()
-            _RECORDER = None
-
-
-class _Pool:
-    """Local worker processes. Spawned, not forked: a fork would share MuJoCo/GL state."""
-
-    def __init__(self, workers: int):
-        self.pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"))
-
-    def submit(self, fn, *args) -> Future:
-        return self.pool.submit(fn, *args)
-
-    def shutdown(self) -> None:
-        self.pool.shutdown(wait=True, cancel_futures=True)
-
-
-class _RayJob:
-    def __init__(self, ray, ref):
-        self.ray, self.ref = ray, ref
-
-    def result(self):
-        return self.ray.get(self.ref)
-
-
-class _Ray:
-    """Episodes spread over a Ray cluster (``RAY_ADDRESS``) or a local Ray instance. Workers
-    return the encoded videos, so they need no shared file system with the writer."""
-
-    def __init__(self):
-        try:
-            import ray
-        except ImportError as err:
-            raise RuntimeError("--backend ray needs Ray: pip install 'rmbench[ray]'") from err
-        self.ray = ray
-        if not ray.is_initialized():
-            ray.init(ignore_reinit_error=True, log_to_driver=False)
-        self.remote = ray.remote(num_cpus=1)(_record)
-
-    def submit(self, fn, *args) -> _RayJob:
-        return _RayJob(self.ray, self.remote.remote(*args))
-
-    def shutdown(self) -> None:
-        pass
+def _close_recorder() -> None:
+    global _RECORDER
+    if _RECORDER is not None:
+        _RECORDER.close()
+        _RECORDER = None
 
 
 def collect(cfg: CollectConfig) -> CollectSummary:
@@ -178,11 +118,8 @@ def collect(cfg: CollectConfig) -> CollectSummary:
                          f"{cfg.episodes} asked; ask for at least {start_episodes}")
     max_attempts = cfg.max_attempts or 10 * cfg.episodes + 20
     attempts = writer.num_episodes + len(writer.skipped)
-    if cfg.backend == "ray":
-        executor = _Ray()
-    else:
-        executor = _Inline() if cfg.workers == 1 else _Pool(cfg.workers)
-    window = 1 if cfg.workers == 1 else 2 * cfg.workers
+    executor = make_executor(cfg.workers, cfg.backend, on_close=_close_recorder)
+    window = executor.window
     pending: deque = deque()  # (seed, job), in seed order
     next_seed = writer.next_seed
     bar = tqdm(total=cfg.episodes, initial=start_episodes, unit="demo", disable=not cfg.progress,

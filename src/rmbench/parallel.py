@@ -1,0 +1,94 @@
+"""Running independent episode jobs: in this process, in local worker processes, or on Ray.
+
+Every executor hands back jobs with a blocking ``result()``. Callers submit a bounded window
+of jobs and consume results in submission order, so what they write does not depend on the
+number of workers or on the backend.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+
+BACKENDS = ("local", "ray")
+
+
+class _Deferred:
+    """A job of the in-process executor: it runs when its result is asked for, in order."""
+
+    def __init__(self, fn, args):
+        self.fn, self.args = fn, args
+
+    def result(self):
+        return self.fn(*self.args)
+
+
+class Inline:
+    """One worker: jobs run in this process, one at a time."""
+
+    window = 1
+
+    def __init__(self, on_close: Callable[[], None] | None = None):
+        self.on_close = on_close
+
+    def submit(self, fn, *args) -> _Deferred:
+        return _Deferred(fn, args)
+
+    def shutdown(self) -> None:
+        if self.on_close is not None:
+            self.on_close()
+
+
+class Pool:
+    """Local worker processes. Spawned, not forked: a fork would share MuJoCo/GL state."""
+
+    def __init__(self, workers: int):
+        self.window = 2 * workers
+        self.pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"))
+
+    def submit(self, fn, *args):
+        return self.pool.submit(fn, *args)
+
+    def shutdown(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+class _RayJob:
+    def __init__(self, ray, ref):
+        self.ray, self.ref = ray, ref
+
+    def result(self):
+        return self.ray.get(self.ref)
+
+
+class Ray:
+    """Jobs spread over a Ray cluster (``RAY_ADDRESS``) or a local Ray instance. Results travel
+    back to the caller, so workers need no shared file system."""
+
+    def __init__(self, workers: int):
+        try:
+            import ray
+        except ImportError as err:
+            raise RuntimeError("--backend ray needs Ray: pip install 'rmbench[ray]'") from err
+        self.ray = ray
+        self.window = 2 * workers
+        if not ray.is_initialized():
+            ray.init(ignore_reinit_error=True, log_to_driver=False)
+        self._remote: dict = {}
+
+    def submit(self, fn, *args) -> _RayJob:
+        if fn not in self._remote:
+            self._remote[fn] = self.ray.remote(num_cpus=1)(fn)
+        return _RayJob(self.ray, self._remote[fn].remote(*args))
+
+    def shutdown(self) -> None:
+        pass
+
+
+def make_executor(workers: int, backend: str = "local", on_close: Callable[[], None] | None = None):
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if backend == "ray":
+        return Ray(workers)
+    return Inline(on_close) if workers == 1 else Pool(workers)

@@ -1,0 +1,37 @@
+"""The policy interface, shared by the scripted experts, the built-in policies and learned ones.
+
+A policy is reset with the episode's instruction and task facts, then asked for actions:
+``act(observation)`` returns one 14-d action or a chunk (k, 14) that the caller executes in
+order before asking again. ``cameras`` says which camera images it reads (none: the
+environment may skip rendering).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+
+
+@runtime_checkable
+class Policy(Protocol):
+    cameras: tuple[str, ...]
+
+    def reset(self, instruction: str, task_info: dict[str, Any]) -> None: ...
+
+    def act(self, observation: dict[str, Any]) -> np.ndarray: ...
+
+
+class BasePolicy:
+    """Convenience base: no cameras, nothing to reset or close."""
+
+    cameras: ClassVar[tuple[str, ...]] = ()
+
+    def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
+        pass
+
+    def act(self, observation: dict[str, Any]) -> np.ndarray:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass

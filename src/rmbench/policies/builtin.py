@@ -1,0 +1,82 @@
+"""The built-in policies: the scripted expert (an upper bound, reading privileged state),
+random and no-op floors, and open-loop replay of a dataset's actions (a determinism check)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from rmbench.experts import make_expert
+from rmbench.policies.base import BasePolicy
+from rmbench.policies.registry import register_policy
+
+
+class ExpertPolicy(BasePolicy):
+    def __init__(self, env):
+        self.expert = make_expert(env)
+
+    def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
+        self.expert.reset(instruction, task_info)
+
+    def act(self, observation):
+        return self.expert.act(observation)
+
+
+class RandomPolicy(BasePolicy):
+    """Uniform targets within the joint limits, from a generator seeded by the episode."""
+
+    def __init__(self, env):
+        space = env.unwrapped.action_space
+        self.low, self.high = space.low.astype(np.float64), space.high.astype(np.float64)
+        self.rng = np.random.default_rng(0)
+
+    def reset(self, instruction, task_info):
+        self.rng = np.random.default_rng(task_info.get("seed", 0))
+
+    def act(self, observation):
+        return self.rng.uniform(self.low, self.high)
+
+
+class NoopPolicy(BasePolicy):
+    """Holds the arms where they are."""
+
+    def act(self, observation):
+        return np.asarray(observation["agent_pos"], np.float64).copy()
+
+
+class ReplayPolicy(BasePolicy):
+    """Replays the recorded actions of the dataset episode with the same seed, open-loop, as
+    one chunk. Evaluated on the dataset's own seeds (``seeds``), it must succeed on every one:
+    the recorded actions reproduce the recorded episode exactly."""
+
+    def __init__(self, root: str, env):
+        from rmbench.data.reader import Dataset
+
+        self.ds = Dataset(root)
+        task = type(env.unwrapped.task).name
+        if self.ds.task != task:
+            raise ValueError(f"replay dataset {root} holds {self.ds.task!r}, not {task!r}")
+        self.by_seed = {int(row["rmbench/seed"]): e for e, row in enumerate(self.ds.episodes)}
+        self.seeds = list(self.by_seed)
+        self._actions: np.ndarray | None = None
+
+    def reset(self, instruction, task_info):
+        seed = task_info.get("seed")
+        if seed not in self.by_seed:
+            raise ValueError(f"the replay dataset has no episode with seed {seed}")
+        self._actions = self.ds.episode(self.by_seed[seed], cameras=[]).action.astype(np.float64)
+
+    def act(self, observation):
+        if self._actions is None:
+            raise RuntimeError("the recorded actions are used up")
+        chunk, self._actions = self._actions, None
+        return chunk
+
+
+register_policy("expert", "the scripted expert (reads privileged simulator state)")(
+    lambda arg, env: ExpertPolicy(env))
+register_policy("random", "uniform random joint targets")(lambda arg, env: RandomPolicy(env))
+register_policy("noop", "hold the current joint positions")(lambda arg, env: NoopPolicy(env))
+register_policy("replay", "replay a dataset's recorded actions on its own seeds",
+                needs_argument=True)(lambda arg, env: ReplayPolicy(arg, env))
