@@ -112,6 +112,27 @@ def cmd_dataset_check(args) -> int:
     return 0
 
 
+def cmd_eval(args) -> int:
+    from rmbench.eval import EvalConfig, evaluate
+    from rmbench.tasks.registry import ordered
+
+    tasks = [c.name for c in ordered()] if args.all else (args.task or [])
+    if not tasks:
+        raise ValueError("name a task with --task, or --all")
+    cfg = EvalConfig(tuple(tasks), args.policy, args.out, episodes=args.episodes, seed=args.seed,
+                     workers=args.workers, backend=args.backend, video=args.video,
+                     instructions=args.instructions, progress=not args.json)
+    summary = evaluate(cfg)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        for task, r in summary["tasks"].items():
+            print(f"{task:<20} {r['tmc']:<5} success {r['successes']:>3}/{r['episodes']:<3} "
+                  f"({100 * r['success_rate']:5.1f}%)  progress {r['mean_progress']:.3f}")
+        print(f"records and summary in {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmbench", description="RMBench: memory-dependent "
                                      "dual-arm manipulation on MuJoCo")
@@ -150,6 +171,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="delete the dataset in --out first")
     _add_json(p)
     p.set_defaults(func=cmd_collect)
+
+    p = sub.add_parser("eval", help="evaluate a policy on expert-verified seeds")
+    p.add_argument("--task", action="append", help="task name or gym id (repeatable)")
+    p.add_argument("--all", action="store_true", help="every task")
+    p.add_argument("--policy", required=True,
+                   help="expert | random | noop | replay:DATASET | remote:ws://HOST:PORT | ...")
+    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--seed", type=int, default=0,
+                   help="evaluation seed s: episodes from 100000 * (1 + s) up")
+    p.add_argument("--out", required=True, help="results folder (resumed if it exists)")
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--backend", choices=["local", "ray"], default="local")
+    p.add_argument("--video", default="first:1", help="first:K | failures | none")
+    p.add_argument("--instructions", choices=["seen", "unseen"], default="seen")
+    _add_json(p)
+    p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("dataset", help="dataset tools")
     dsub = p.add_subparsers(dest="dataset_command", required=True)

@@ -74,9 +74,11 @@ class ReplayPolicy(BasePolicy):
         return chunk
 
 
-register_policy("expert", "the scripted expert (reads privileged simulator state)")(
-    lambda arg, env: ExpertPolicy(env))
-register_policy("random", "uniform random joint targets")(lambda arg, env: RandomPolicy(env))
-register_policy("noop", "hold the current joint positions")(lambda arg, env: NoopPolicy(env))
+register_policy("expert", "the scripted expert (reads privileged simulator state)",
+                cameras=())(lambda arg, env: ExpertPolicy(env))
+register_policy("random", "uniform random joint targets", cameras=())(
+    lambda arg, env: RandomPolicy(env))
+register_policy("noop", "hold the current joint positions", cameras=())(
+    lambda arg, env: NoopPolicy())
 register_policy("replay", "replay a dataset's recorded actions on its own seeds",
-                needs_argument=True)(lambda arg, env: ReplayPolicy(arg, env))
+                needs_argument=True, cameras=())(lambda arg, env: ReplayPolicy(arg, env))

@@ -23,16 +23,19 @@ class PolicyEntry:
     factory: PolicyFactory
     help: str
     needs_argument: bool = False
+    # cameras the policy reads: None = the station's default set, () = none (no rendering)
+    cameras: tuple[str, ...] | None = None
 
 
 POLICIES: dict[str, PolicyEntry] = {}
 
 
-def register_policy(name: str, help: str, needs_argument: bool = False):
+def register_policy(name: str, help: str, needs_argument: bool = False,
+                    cameras: tuple[str, ...] | None = None):
     def wrap(factory: PolicyFactory) -> PolicyFactory:
         if name in POLICIES:
             raise ValueError(f"policy {name!r} is already registered")
-        POLICIES[name] = PolicyEntry(name, factory, help, needs_argument)
+        POLICIES[name] = PolicyEntry(name, factory, help, needs_argument, cameras)
         return factory
 
     return wrap

@@ -1,0 +1,235 @@
+"""``rmbench eval``: a policy on expert-verified seeds of one or more tasks, resumable.
+
+Layout of ``out``::
+
+    run.json                   what was asked (policy, seed, episodes, instructions)
+    <task>/episodes.jsonl      one record per episode, appended and flushed as it ends
+    <task>/videos/seed-N.mp4   third-person videos (per --video)
+    summary.json, summary.md   per-task success rate and progress
+
+Records are appended in seed order whatever the worker count, so results are identical for
+any number of workers or backend. A killed run re-run with the same arguments keeps every
+complete record (a torn last line is dropped) and runs only the missing seeds.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from rmbench.envs.registration import make
+from rmbench.eval.episode import ENDINGS, run_policy_episode
+from rmbench.eval.seeds import verified_seeds
+from rmbench.parallel import BACKENDS, make_executor
+from rmbench.policies.registry import make_policy, parse_spec
+from rmbench.tasks import get_task
+from rmbench.video import write_atomic
+
+log = logging.getLogger(__name__)
+
+
+class EvalError(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    tasks: tuple[str, ...]
+    policy: str
+    out: str | Path
+    episodes: int = 100
+    seed: int = 0
+    workers: int = 1
+    backend: str = "local"
+    video: str = "first:1"  # first:K | failures | none
+    instructions: str = "seen"
+    progress: bool = True
+    seed_cache: str | Path | None = None
+
+    def __post_init__(self):
+        if not self.tasks:
+            raise ValueError("no task to evaluate")
+        object.__setattr__(self, "tasks", tuple(get_task(t).name for t in self.tasks))
+        parse_spec(self.policy)  # unknown policy: one line listing the known ones
+        if self.episodes < 1 or self.workers < 1 or self.seed < 0:
+            raise ValueError("episodes and workers must be >= 1 and seed >= 0")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        if self.instructions not in ("seen", "unseen"):
+            raise ValueError(f"instructions must be 'seen' or 'unseen', got {self.instructions!r}")
+        self.video_rule(0, True)
+
+    def video_rule(self, index: int, success: bool | None) -> bool:
+        """Keep a video of the ``index``-th episode? (``success`` None: before it runs.)"""
+        if self.video == "none":
+            return False
+        if self.video == "failures":
+            return success is None or not success
+        m = re.fullmatch(r"first:(\d+)", self.video)
+        if not m:
+            raise ValueError(f"video must be first:K, failures or none, got {self.video!r}")
+        return index < int(m.group(1))
+
+    def identity(self) -> dict[str, Any]:
+        return {"policy": self.policy, "seed": self.seed, "episodes": self.episodes,
+                "instructions": self.instructions}
+
+
+# One (env, policy) per worker process, rebuilt when the job's task or policy changes.
+_WORKER: dict[str, Any] = {}
+
+
+def _episode_job(task: str, policy: str, instructions: str, seed: int, video: bool) -> dict:
+    key = (task, policy, instructions)
+    if _WORKER.get("key") != key:
+        _close_worker()
+        entry, _ = parse_spec(policy)
+        kwargs = {"render": False} if entry.cameras == () else (
+            {"cameras": entry.cameras} if entry.cameras else {})
+        env = make(task, instructions=instructions, **kwargs)
+        _WORKER.update(key=key, env=env, policy=make_policy(policy, env))
+    return run_policy_episode(_WORKER["env"], _WORKER["policy"], seed, video)
+
+
+def _close_worker() -> None:
+    if "env" in _WORKER:
+        getattr(_WORKER["policy"], "close", lambda: None)()
+        _WORKER["env"].close()
+    _WORKER.clear()
+
+
+def read_records(path: Path) -> list[dict]:
+    """Complete records of a JSONL file; a torn last line (a killed writer) is cut off."""
+    if not path.exists():
+        return []
+    data = path.read_bytes()
+    records, good = [], 0
+    for line in data.splitlines(keepends=True):
+        if not line.endswith(b"\n"):
+            break
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            break
+        good += len(line)
+    if good < len(data):
+        log.warning("%s: dropping an incomplete last record", path)
+        with open(path, "r+b") as f:
+            f.truncate(good)
+    return records
+
+
+@dataclass
+class TaskResult:
+    task: str
+    tmc: str
+    episodes: int
+    successes: int
+    success_rate: float
+    mean_progress: float
+    endings: dict[str, int] = field(default_factory=dict)
+
+
+def summarize(task: str, records: list[dict]) -> TaskResult:
+    n = len(records)
+    ok = sum(r["success"] for r in records)
+    endings = {e: sum(r["reason"] == e for r in records) for e in ENDINGS}
+    return TaskResult(task, get_task(task).tmc, n, ok, round(ok / n, 4) if n else 0.0,
+                      round(sum(r["progress"] for r in records) / n, 4) if n else 0.0, endings)
+
+
+def _check_identity(out: Path, cfg: EvalConfig) -> None:
+    path = out / "run.json"
+    if path.exists():
+        old = json.loads(path.read_text())
+        diff = [k for k, v in cfg.identity().items() if old.get(k) != v]
+        if diff:
+            what = ", ".join(f"{k} {old.get(k)!r} there, {cfg.identity()[k]!r} asked" for k in diff)
+            raise EvalError(f"{out} holds an evaluation with other arguments ({what}); use "
+                            f"another --out")
+    else:
+        write_atomic(path, (json.dumps(cfg.identity(), indent=2) + "\n").encode())
+
+
+def evaluate(cfg: EvalConfig) -> dict[str, Any]:
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    _check_identity(out, cfg)
+    results = {}
+    for task in cfg.tasks:
+        results[task] = _evaluate_task(cfg, task, out / task)
+    summary = {"policy": cfg.policy, "seed": cfg.seed, "instructions": cfg.instructions,
+               "tasks": {t: r.__dict__ for t, r in results.items()}}
+    write_atomic(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
+    write_atomic(out / "summary.md", summary_markdown(summary).encode())
+    return summary
+
+
+def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
+    folder.mkdir(parents=True, exist_ok=True)
+    entry, arg = parse_spec(cfg.policy)
+    if entry.name == "replay":
+        from rmbench.data.reader import Dataset
+
+        seeds = [int(r["rmbench/seed"]) for r in Dataset(arg).episodes][: cfg.episodes]
+    else:
+        seeds = verified_seeds(task, cfg.seed, cfg.episodes, cfg.seed_cache)
+    path = folder / "episodes.jsonl"
+    records = [r for r in read_records(path) if r["seed"] in seeds]
+    done = {r["seed"] for r in records}
+    todo = [(i, s) for i, s in enumerate(seeds) if s not in done]
+    executor = make_executor(cfg.workers, cfg.backend, on_close=_close_worker)
+    pending: deque = deque()
+    bar = tqdm(total=len(seeds), initial=len(done), unit="ep", desc=f"{task} {cfg.policy}",
+               disable=not cfg.progress, dynamic_ncols=True)
+    t0 = time.perf_counter()
+    try:
+        with open(path, "a", encoding="utf-8") as f:
+            while todo or pending:
+                while todo and len(pending) < executor.window:
+                    i, s = todo.pop(0)
+                    pending.append((i, executor.submit(_episode_job, task, cfg.policy,
+                                                       cfg.instructions, s,
+                                                       cfg.video_rule(i, None))))
+                i, job = pending.popleft()
+                rec = job.result()
+                video = rec.pop("video")
+                rec["video"] = None
+                if video is not None and cfg.video_rule(i, rec["success"]):
+                    name = f"videos/seed-{rec['seed']}.mp4"
+                    write_atomic(folder / name, video)
+                    rec["video"] = name
+                f.write(json.dumps(rec) + "\n")
+                f.flush()
+                os.fsync(f.fileno())
+                records.append(rec)
+                bar.update(1)
+                bar.set_postfix(success=f"{sum(r['success'] for r in records)}/{len(records)}",
+                                refresh=False)
+    finally:
+        bar.close()
+        executor.shutdown()
+    log.info("%s: %d episodes in %.1fs", task, len(todo), time.perf_counter() - t0)
+    order = {s: k for k, s in enumerate(seeds)}
+    return summarize(task, sorted(records, key=lambda r: order[r["seed"]]))
+
+
+def summary_markdown(summary: dict) -> str:
+    lines = [f"# {summary['policy']}: evaluation seed {summary['seed']}, "
+             f"{summary['instructions']} instructions", "",
+             "| task | TMC | episodes | success rate | mean progress | " + " | ".join(ENDINGS) + " |",
+             "|---|---|---|---|---|" + "---|" * len(ENDINGS)]
+    for t, r in summary["tasks"].items():
+        lines.append(f"| {t} | {r['tmc']} | {r['episodes']} | {100 * r['success_rate']:.1f}% | "
+                     f"{r['mean_progress']:.3f} | "
+                     + " | ".join(str(r["endings"][e]) for e in ENDINGS) + " |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,128 @@
+"""Evaluation harness: records, policy errors, resume after a kill, worker determinism."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from rmbench.eval import EvalConfig, EvalError, evaluate
+from rmbench.eval.harness import read_records
+from rmbench.policies import BasePolicy, UnknownPolicyError, register_policy
+from tests.conftest import DATA_TASK as TASK
+
+
+class Faulty(BasePolicy):
+    """Misbehaves differently per seed: raises, NaN, wrong shape; fine (no-op) otherwise."""
+
+    def reset(self, instruction, task_info):
+        self.kind = task_info["seed"] % 4
+
+    def act(self, observation):
+        if self.kind == 0:
+            raise RuntimeError("boom")
+        if self.kind == 1:
+            return np.full(14, np.nan)
+        if self.kind == 2:
+            return np.zeros(7)
+        return observation["agent_pos"]
+
+
+register_policy("test_faulty", "raises, NaN, wrong shape, no-op by seed", cameras=())(
+    lambda arg, env: Faulty())
+
+
+def cfg(tmp_path, **kw) -> EvalConfig:
+    args = {"episodes": 3, "seed_cache": tmp_path / "seeds", "progress": False, "video": "none",
+            **kw}
+    return EvalConfig((TASK,), kw.pop("policy", "expert"), tmp_path / "out",
+                      **{k: v for k, v in args.items() if k != "policy"})
+
+
+def records(tmp_path):
+    return read_records(tmp_path / "out" / TASK / "episodes.jsonl")
+
+
+def test_expert_solves_verified_seeds_and_records_everything(tmp_path):
+    summary = evaluate(cfg(tmp_path, video="first:1"))
+    r = summary["tasks"][TASK]
+    assert r["successes"] == 3 and r["success_rate"] == 1.0 and r["mean_progress"] == 1.0
+    recs = records(tmp_path)
+    assert [x["seed"] for x in recs] == [100000, 100001, 100002]
+    assert {"task", "seed", "success", "progress", "steps", "wall_s", "reason", "message"} <= set(recs[0])
+    assert recs[0]["video"] == "videos/seed-100000.mp4" and recs[1]["video"] is None
+    assert (tmp_path / "out" / TASK / recs[0]["video"]).stat().st_size > 1000
+    assert "| observe_and_pickup | M(1) | 3 | 100.0% |" in (tmp_path / "out" / "summary.md").read_text()
+    cache = json.loads(next((tmp_path / "seeds").glob("*.json")).read_text())
+    assert cache["verified"][:3] == [100000, 100001, 100002]
+
+
+def test_policy_errors_are_recorded_and_the_evaluation_goes_on(tmp_path):
+    summary = evaluate(cfg(tmp_path, policy="test_faulty", episodes=4))
+    recs = {x["seed"] % 4: x for x in records(tmp_path)}
+    assert recs[0]["reason"] == "policy_error" and "RuntimeError: boom" in recs[0]["message"]
+    assert recs[1]["reason"] == "policy_error" and "NaN" in recs[1]["message"]
+    assert recs[2]["reason"] == "policy_error" and "shape" in recs[2]["message"]
+    assert recs[3]["reason"] in ("timeout", "task_failure") and recs[3]["steps"] > 0
+    assert summary["tasks"][TASK]["endings"]["policy_error"] == 3
+
+
+def test_resume_keeps_complete_records_and_drops_a_torn_one(tmp_path):
+    evaluate(cfg(tmp_path, policy="random"))
+    path = tmp_path / "out" / TASK / "episodes.jsonl"
+    full = records(tmp_path)
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text(lines[0] + lines[1][:20])  # killed while writing the second record
+    evaluate(cfg(tmp_path, policy="random"))
+    again = records(tmp_path)
+    strip = [{k: v for k, v in r.items() if k != "wall_s"} for r in again]
+    assert [r["seed"] for r in again] == [r["seed"] for r in full]
+    assert strip == [{k: v for k, v in r.items() if k != "wall_s"} for r in full]
+
+
+def test_sigkill_and_resume_gives_exactly_n_unique_episodes(tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "rmbench.cli.main", "eval", "--task", TASK, "--policy",
+           "expert", "--episodes", "4", "--out", str(out), "--video", "none", "--json"]
+    env = {**os.environ, "RMBENCH_CACHE": str(tmp_path / "cache")}
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    path = out / TASK / "episodes.jsonl"
+    deadline = time.time() + 120
+    while not (path.exists() and path.read_text().count("\n") >= 1) and time.time() < deadline:
+        time.sleep(0.02)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert subprocess.run(cmd, capture_output=True, env=env).returncode == 0
+    seeds = [r["seed"] for r in read_records(path)]
+    assert len(seeds) == 4 and len(set(seeds)) == 4
+
+
+def test_results_do_not_depend_on_the_worker_count(tmp_path):
+    one = evaluate(cfg(tmp_path / "a", policy="random", episodes=4))
+    two = evaluate(cfg(tmp_path / "b", policy="random", episodes=4, workers=2))
+    assert one == two
+    strip = [{k: v for k, v in r.items() if k != "wall_s"} for r in records(tmp_path / "a")]
+    assert strip == [{k: v for k, v in r.items() if k != "wall_s"} for r in records(tmp_path / "b")]
+
+
+def test_other_arguments_on_the_same_folder_are_refused(tmp_path):
+    evaluate(cfg(tmp_path, policy="noop", episodes=1))
+    with pytest.raises(EvalError, match=r"other arguments \(policy 'noop' there, 'random' asked"):
+        evaluate(cfg(tmp_path, policy="random", episodes=1))
+
+
+def test_replay_of_a_dataset_succeeds_on_its_own_seeds(dataset, tmp_path):
+    summary = evaluate(cfg(tmp_path, policy=f"replay:{dataset}"))
+    assert summary["tasks"][TASK]["successes"] == 3
+    assert [r["seed"] for r in records(tmp_path)] == [0, 1, 2]
+
+
+def test_unknown_policy_lists_the_known_ones(tmp_path):
+    with pytest.raises(UnknownPolicyError, match=r"unknown policy 'dp'.*expert.*replay:ARG"):
+        cfg(tmp_path, policy="dp")
+    with pytest.raises(UnknownPolicyError, match="needs an argument"):
+        cfg(tmp_path, policy="replay")
