@@ -133,6 +133,14 @@ def cmd_eval(args) -> int:
     return 0
 
 
+def cmd_serve(args) -> int:
+    from rmbench.serve.server import PolicyServer
+    from rmbench.tasks import get_task
+
+    PolicyServer(args.policy, get_task(args.task).name, args.host, args.port).serve_forever()
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmbench", description="RMBench: memory-dependent "
                                      "dual-arm manipulation on MuJoCo")
@@ -187,6 +195,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--instructions", choices=["seen", "unseen"], default="seen")
     _add_json(p)
     p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("serve", help="serve a policy over a websocket (msgpack-numpy)")
+    p.add_argument("--policy", required=True, help="policy spec, e.g. random or replay:DATASET")
+    p.add_argument("--task", required=True, help="the task the policy acts in")
+    p.add_argument("--host", default="127.0.0.1", help="bind address (default: this machine only)")
+    p.add_argument("--port", type=int, default=8000)
+    p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser("dataset", help="dataset tools")
     dsub = p.add_subparsers(dest="dataset_command", required=True)

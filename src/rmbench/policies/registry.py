@@ -64,3 +64,4 @@ def make_policy(spec: str, env) -> Policy:
 
 def _load_builtin() -> None:
     from rmbench.policies import builtin  # noqa: F401  (registers)
+    from rmbench.serve import client  # noqa: F401  (registers remote:)

@@ -1,0 +1,1 @@
+"""Policies over a websocket: the server (``rmbench serve``) and the ``remote:`` client."""
