@@ -126,3 +126,16 @@ def test_unknown_policy_lists_the_known_ones(tmp_path):
         cfg(tmp_path, policy="dp")
     with pytest.raises(UnknownPolicyError, match="needs an argument"):
         cfg(tmp_path, policy="replay")
+
+
+def test_report_renders_markdown_and_html(tmp_path):
+    from rmbench.eval.report import write_report
+
+    evaluate(cfg(tmp_path, video="first:1", episodes=2))
+    md = write_report([tmp_path / "out"], tmp_path / "r.md", ["Mem-0"]).read_text()
+    assert "| observe_and_pickup | M(1) | 100.0 | 4.0 |" in md
+    assert "| **average M(1)** | M(1) | — | 52.8 |" in md  # other M(1) tasks not evaluated
+    page = write_report([tmp_path / "out"], tmp_path / "r.html", []).read_text()
+    assert "<svg" in page and "seed-100000.mp4" in page
+    with pytest.raises(ValueError, match="no published numbers"):
+        write_report([tmp_path / "out"], tmp_path / "r.md", ["GPT"])

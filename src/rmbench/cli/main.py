@@ -141,6 +141,14 @@ def cmd_serve(args) -> int:
     return 0
 
 
+def cmd_report(args) -> int:
+    from rmbench.eval.report import write_report
+
+    out = write_report(args.dirs, args.out, args.published or [])
+    print(f"wrote {out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmbench", description="RMBench: memory-dependent "
                                      "dual-arm manipulation on MuJoCo")
@@ -195,6 +203,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--instructions", choices=["seen", "unseen"], default="seen")
     _add_json(p)
     p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("report", help="tasks x policies table from evaluation folders")
+    p.add_argument("dirs", nargs="+", metavar="DIR", help="rmbench eval output folders")
+    p.add_argument("--out", default="report.md", help="report.md or report.html")
+    p.add_argument("--published", nargs="*", metavar="POLICY",
+                   help="add published success rates: DP ACT Pi0.5 X-VLA Mem-0")
+    p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("serve", help="serve a policy over a websocket (msgpack-numpy)")
     p.add_argument("--policy", required=True, help="policy spec, e.g. random or replay:DATASET")
