@@ -79,6 +79,7 @@ class DemoDataset(torch.utils.data.Dataset):
         self.episode_ids = list(range(self.ds.num_episodes) if episodes is None else episodes)
         self.cache = FrameCache(self.ds, image_size, cache_dir)
         self.low_dim = [self.ds.episode(e, cameras=[]) for e in self.episode_ids]
+        self.task_index = [self.ds.instructions.index(ep.instruction) for ep in self.low_dim]
         lengths = np.array([len(ep) for ep in self.low_dim], dtype=np.int64)
         self.starts = np.concatenate([[0], np.cumsum(lengths)])
         self.lengths = lengths
@@ -104,7 +105,7 @@ class DemoDataset(torch.utils.data.Dataset):
             "action_is_pad": torch.from_numpy(np.arange(t, t + self.chunk) >= n),
             L.SUBTASK_INDEX: torch.tensor(int(ep.subtask_index[t])),
             L.SUBTASK_END: torch.tensor(bool(ep.subtask_end[t])),
-            "task_index": torch.tensor(self.ds.instructions.index(ep.instruction)),
+            "task_index": torch.tensor(self.task_index[k]),
             "episode_index": torch.tensor(ep.index),
             "frame_index": torch.tensor(t),
             "episode_start": torch.tensor(t == 0),

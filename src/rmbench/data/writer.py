@@ -25,6 +25,7 @@ import pyarrow.parquet as pq
 from rmbench.data import layout as L
 from rmbench.data.record import EpisodeRecord
 from rmbench.data.stats import aggregate, array_stats, to_json
+from rmbench.identity import differences
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
 
@@ -220,11 +221,8 @@ class DatasetWriter:
         except (OSError, json.JSONDecodeError) as err:
             raise DatasetError(f"{self.root / L.RMBENCH} is unreadable ({err}); pass --overwrite "
                                f"to start over") from err
-        old = saved.get("collection", {})
-        diff = [k for k in sorted(set(old) | set(self.collection))
-                if old.get(k) != self.collection.get(k)]
-        if diff:
-            what = ", ".join(f"{k} {old.get(k)!r} there, {self.collection.get(k)!r} asked" for k in diff)
+        what = differences(saved.get("collection", {}), self.collection)
+        if what:
             raise DatasetError(f"{self.root} was collected with other arguments ({what}); run "
                                f"with the same arguments to resume, or --overwrite to start over")
         for path in _committed_episode_files(self.root):

@@ -29,6 +29,7 @@ from tqdm import tqdm
 from rmbench.envs.registration import make
 from rmbench.eval.episode import ENDINGS, run_policy_episode
 from rmbench.eval.seeds import verified_seeds
+from rmbench.identity import differences
 from rmbench.parallel import BACKENDS, make_executor
 from rmbench.policies.registry import make_policy, parse_spec
 from rmbench.tasks import get_task
@@ -150,10 +151,8 @@ def summarize(task: str, records: list[dict]) -> TaskResult:
 def _check_identity(out: Path, cfg: EvalConfig) -> None:
     path = out / "run.json"
     if path.exists():
-        old = json.loads(path.read_text())
-        diff = [k for k, v in cfg.identity().items() if old.get(k) != v]
-        if diff:
-            what = ", ".join(f"{k} {old.get(k)!r} there, {cfg.identity()[k]!r} asked" for k in diff)
+        what = differences(json.loads(path.read_text()), cfg.identity())
+        if what:
             raise EvalError(f"{out} holds an evaluation with other arguments ({what}); use "
                             f"another --out")
     else:
