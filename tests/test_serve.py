@@ -58,3 +58,79 @@ def test_malformed_messages_get_an_error_and_the_server_keeps_serving(server):
 def test_privileged_policies_are_not_served():
     with pytest.raises(ValueError, match="cannot be served"):
         PolicyServer("expert", TASK)
+
+
+class OpenpiStandIn:
+    """A stand-in for openpi's websocket policy server, for testing the adapter only: the same
+    wire format and ALOHA input keys, answering a 50-step chunk that holds the given state. On
+    a bad input it does what openpi's server does: send the traceback as text and close."""
+
+    def __init__(self):
+        from websockets.sync.server import serve
+        self.seen: list[dict] = []
+        self.fail = False
+        self._server = serve(self.handle, "127.0.0.1", 0, compression=None)
+        self.port = self._server.socket.getsockname()[1]
+        import threading
+        threading.Thread(target=self._server.serve_forever, daemon=True).start()
+
+    def handle(self, ws):
+        ws.send(pack({"action_horizon": 50}))  # openpi greets with its policy metadata
+        for raw in ws:
+            obs = unpack(raw)
+            try:
+                if self.fail:
+                    raise ValueError("model exploded")
+                assert set(obs) == {"state", "images", "prompt"}
+                assert set(obs["images"]) == {"cam_high", "cam_left_wrist", "cam_right_wrist"}
+                self.seen.append(obs)
+                ws.send(pack({"actions": np.tile(np.pad(obs["state"], (0, 18)), (50, 1)),
+                              "server_timing": {"infer_ms": 1.0}}))
+            except Exception as err:
+                ws.send(f"Traceback (most recent call last):\n  ...\nValueError: {err}")
+                ws.close()
+                return
+
+    def stop(self):
+        self._server.shutdown()
+
+
+@pytest.fixture
+def openpi_server():
+    s = OpenpiStandIn()
+    yield s
+    s.stop()
+
+
+def test_openpi_adapter_sends_the_aloha_layout(openpi_server, tmp_path):
+    summary = evaluate(EvalConfig((TASK,), f"remote:ws://127.0.0.1:{openpi_server.port}?steps=10",
+                                  tmp_path / "pi", episodes=1, video="none", progress=False,
+                                  seed_cache=tmp_path / "s"))
+    (record,) = read_records(tmp_path / "pi" / TASK / "episodes.jsonl")
+    assert record["reason"] in ("timeout", "task_failure"), record
+    seen = openpi_server.seen
+    # one request per 10 executed steps: the chunk was cut to ?steps=10
+    assert len(seen) == -(-record["steps"] // 10)
+    first = seen[0]
+    assert first["state"].dtype == np.float32 and first["state"].shape == (14,)
+    img = first["images"]["cam_high"]
+    assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[0] == 3  # CHW
+    assert first["prompt"] == record["instruction"] and first["prompt"]
+    assert summary["tasks"][TASK]["episodes"] == 1
+
+
+def test_openpi_server_error_is_a_policy_error(openpi_server, tmp_path):
+    openpi_server.fail = True
+    evaluate(EvalConfig((TASK,), f"remote:ws://127.0.0.1:{openpi_server.port}", tmp_path / "pi",
+                        episodes=1, video="none", progress=False, seed_cache=tmp_path / "s"))
+    (record,) = read_records(tmp_path / "pi" / TASK / "episodes.jsonl")
+    assert record["reason"] == "policy_error"
+    assert "model exploded" in record["message"]
+
+
+def test_remote_arguments_are_checked():
+    from rmbench.serve.client import parse_remote
+    assert parse_remote("ws://h:1/p?adapter=openpi&steps=5&x=1") == ("ws://h:1/p?x=1", "openpi", 5)
+    for bad in ("http://h:1", "ws://h:1?adapter=grpc", "ws://h:1?steps=0"):
+        with pytest.raises(ValueError):
+            parse_remote(bad)

@@ -26,12 +26,12 @@ from typing import Any
 
 from tqdm import tqdm
 
-from rmbench.envs.registration import make
-from rmbench.eval.episode import ENDINGS, run_policy_episode
+from rmbench.eval.episode import ENDINGS
 from rmbench.eval.seeds import verified_seeds
+from rmbench.eval.worker import close_worker, episode_job
 from rmbench.identity import differences
 from rmbench.parallel import BACKENDS, make_executor
-from rmbench.policies.registry import make_policy, parse_spec
+from rmbench.policies.registry import parse_spec
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
 
@@ -83,29 +83,6 @@ class EvalConfig:
     def identity(self) -> dict[str, Any]:
         return {"policy": self.policy, "seed": self.seed, "episodes": self.episodes,
                 "instructions": self.instructions}
-
-
-# One (env, policy) per worker process, rebuilt when the job's task or policy changes.
-_WORKER: dict[str, Any] = {}
-
-
-def _episode_job(task: str, policy: str, instructions: str, seed: int, video: bool) -> dict:
-    key = (task, policy, instructions)
-    if _WORKER.get("key") != key:
-        _close_worker()
-        entry, _ = parse_spec(policy)
-        kwargs = {"render": False} if entry.cameras == () else (
-            {"cameras": entry.cameras} if entry.cameras else {})
-        env = make(task, instructions=instructions, **kwargs)
-        _WORKER.update(key=key, env=env, policy=make_policy(policy, env))
-    return run_policy_episode(_WORKER["env"], _WORKER["policy"], seed, video)
-
-
-def _close_worker() -> None:
-    if "env" in _WORKER:
-        getattr(_WORKER["policy"], "close", lambda: None)()
-        _WORKER["env"].close()
-    _WORKER.clear()
 
 
 def read_records(path: Path) -> list[dict]:
@@ -176,17 +153,28 @@ def evaluate(cfg: EvalConfig) -> dict[str, Any]:
 def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
     folder.mkdir(parents=True, exist_ok=True)
     entry, arg = parse_spec(cfg.policy)
-    if entry.name == "replay":
-        from rmbench.data.reader import Dataset
+    # one executor for the seed search and the episodes: its workers keep their env
+    executor = make_executor(cfg.workers, cfg.backend, on_close=close_worker)
+    try:
+        if entry.name == "replay":
+            from rmbench.data.reader import Dataset
 
-        seeds = [int(r["rmbench/seed"]) for r in Dataset(arg).episodes][: cfg.episodes]
-    else:
-        seeds = verified_seeds(task, cfg.seed, cfg.episodes, cfg.seed_cache)
+            seeds = [int(r["rmbench/seed"]) for r in Dataset(arg).episodes][: cfg.episodes]
+        else:
+            seeds = verified_seeds(task, cfg.seed, cfg.episodes, cfg.seed_cache, executor,
+                                   progress=cfg.progress)
+        return _run_episodes(cfg, task, folder, seeds, executor)
+    finally:
+        executor.shutdown()
+
+
+def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
+                  executor) -> TaskResult:
     path = folder / "episodes.jsonl"
     records = [r for r in read_records(path) if r["seed"] in seeds]
     done = {r["seed"] for r in records}
     todo = [(i, s) for i, s in enumerate(seeds) if s not in done]
-    executor = make_executor(cfg.workers, cfg.backend, on_close=_close_worker)
+    n_todo = len(todo)
     pending: deque = deque()
     bar = tqdm(total=len(seeds), initial=len(done), unit="ep", desc=f"{task} {cfg.policy}",
                disable=not cfg.progress, dynamic_ncols=True)
@@ -196,7 +184,7 @@ def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
             while todo or pending:
                 while todo and len(pending) < executor.window:
                     i, s = todo.pop(0)
-                    pending.append((i, executor.submit(_episode_job, task, cfg.policy,
+                    pending.append((i, executor.submit(episode_job, task, cfg.policy,
                                                        cfg.instructions, s,
                                                        cfg.video_rule(i, None))))
                 i, job = pending.popleft()
@@ -216,8 +204,7 @@ def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
                                 refresh=False)
     finally:
         bar.close()
-        executor.shutdown()
-    log.info("%s: %d episodes in %.1fs", task, len(todo), time.perf_counter() - t0)
+    log.info("%s: %d episodes in %.1fs", task, n_todo, time.perf_counter() - t0)
     order = {s: k for k, s in enumerate(seeds)}
     return summarize(task, sorted(records, key=lambda r: order[r["seed"]]))
 

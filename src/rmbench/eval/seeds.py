@@ -1,8 +1,10 @@
 """Expert-verified evaluation seeds: an episode counts only if the scripted expert solves it.
 
-Candidates run from ``100000 * (1 + seed)`` upward, physics only. The verified list is cached
-per task, gym id (its version) and evaluation seed, so re-runs skip the search; a longer list
-extends the cached one.
+Candidates run from ``100000 * (1 + seed)`` upward, physics only, through the same episode
+job as the evaluation (so on the evaluation's workers). Results are taken in candidate order,
+so the list is the first N solved seeds whatever the worker count. The list is cached per
+task, gym id (its version) and evaluation seed and saved after every candidate, so re-runs and
+interrupted searches skip what is known; a longer list extends the cached one.
 """
 
 from __future__ import annotations
@@ -10,11 +12,13 @@ from __future__ import annotations
 import json
 import logging
 import os
+from collections import deque
 from pathlib import Path
 
-from rmbench.envs.registration import make
-from rmbench.experts import make_expert
-from rmbench.rollout import run_episode
+from tqdm import tqdm
+
+from rmbench.eval.worker import close_worker, episode_job
+from rmbench.parallel import Inline
 from rmbench.seeds import EVAL_SEED_STRIDE, eval_seed_start
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
@@ -26,35 +30,50 @@ def cache_dir() -> Path:
     return Path(os.environ.get("RMBENCH_CACHE", Path.home() / ".cache" / "rmbench")) / "seeds"
 
 
-def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = None) -> list[int]:
+def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = None,
+                   executor=None, progress: bool = False) -> list[int]:
     """The first ``episodes`` seeds from evaluation seed ``seed`` that the expert solves."""
     cls = get_task(task)
-    path = (cache or cache_dir()) / f"{cls.gym_id.replace('/', '_')}-seed{seed}.json"
+    path = Path(cache or cache_dir()) / f"{cls.gym_id.replace('/', '_')}-seed{seed}.json"
     state = {"task": cls.name, "gym_id": cls.gym_id, "seed": seed, "verified": [], "rejected": []}
     if path.exists():
         try:
             state = json.loads(path.read_text())
         except (OSError, json.JSONDecodeError):
             log.warning("ignoring unreadable seed cache %s", path)
-    if len(state["verified"]) >= episodes:
-        return state["verified"][:episodes]
-    tried = state["verified"] + [r["seed"] for r in state["rejected"]]
+    verified = state["verified"]
+    if len(verified) >= episodes:
+        return verified[:episodes]
+    tried = verified + [r["seed"] for r in state["rejected"]]
     candidate = max(tried) + 1 if tried else eval_seed_start(seed)
-    env = make(cls.name, render=False)
-    expert = make_expert(env)
+    end = eval_seed_start(seed) + EVAL_SEED_STRIDE
+    own = executor is None
+    executor = executor or Inline(on_close=close_worker)
+    pending: deque = deque()
+    bar = tqdm(total=episodes, initial=len(verified), unit="seed", disable=not progress,
+               desc=f"{cls.name} verifying seeds", dynamic_ncols=True)
     try:
-        while len(state["verified"]) < episodes:
-            if candidate >= eval_seed_start(seed) + EVAL_SEED_STRIDE:
+        while len(verified) < episodes:
+            # never more in flight than could still be needed: the list stays the first N
+            while (len(pending) < executor.window and candidate < end
+                   and len(verified) + len(pending) < episodes):
+                pending.append((candidate, executor.submit(
+                    episode_job, cls.name, "expert", "seen", candidate, False)))
+                candidate += 1
+            if not pending:
                 raise RuntimeError(f"{cls.name}: fewer than {episodes} expert-solved seeds "
                                    f"from {eval_seed_start(seed)}")
-            result = run_episode(env, expert, candidate)
-            if result.success:
-                state["verified"].append(candidate)
+            c, job = pending.popleft()
+            record = job.result()
+            if record["success"]:
+                verified.append(c)
+                bar.update(1)
             else:
-                log.info("%s: evaluation seed %d rejected (%s)", cls.name, candidate, result.reason)
-                state["rejected"].append({"seed": candidate, "reason": result.reason})
-            candidate += 1
+                log.info("%s: evaluation seed %d rejected (%s)", cls.name, c, record["reason"])
+                state["rejected"].append({"seed": c, "reason": record["reason"]})
+            write_atomic(path, (json.dumps(state, indent=1) + "\n").encode())
     finally:
-        env.close()
-        write_atomic(path, (json.dumps(state, indent=1) + "\n").encode())
-    return state["verified"][:episodes]
+        bar.close()
+        if own:
+            executor.shutdown()
+    return verified[:episodes]

@@ -1,0 +1,34 @@
+"""The episode job that evaluation workers run, with one (env, policy) kept per process.
+
+Building an env and a policy costs more than a short episode, so a worker keeps them while
+consecutive jobs ask for the same task, policy and instruction set.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rmbench.envs.registration import make
+from rmbench.eval.episode import run_policy_episode
+from rmbench.policies.registry import make_policy, parse_spec
+
+_WORKER: dict[str, Any] = {}
+
+
+def episode_job(task: str, policy: str, instructions: str, seed: int, video: bool) -> dict:
+    key = (task, policy, instructions)
+    if _WORKER.get("key") != key:
+        close_worker()
+        entry, _ = parse_spec(policy)
+        kwargs = {"render": False} if entry.cameras == () else (
+            {"cameras": entry.cameras} if entry.cameras else {})
+        env = make(task, instructions=instructions, **kwargs)
+        _WORKER.update(key=key, env=env, policy=make_policy(policy, env))
+    return run_policy_episode(_WORKER["env"], _WORKER["policy"], seed, video)
+
+
+def close_worker() -> None:
+    if "env" in _WORKER:
+        getattr(_WORKER["policy"], "close", lambda: None)()
+        _WORKER["env"].close()
+    _WORKER.clear()
