@@ -149,6 +149,21 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_train(args) -> int:
+    from rmbench.training.cli import run_training
+
+    result = run_training(args.policy, args.dataset, args.out, steps=args.steps,
+                          batch_size=args.batch_size, device=args.device, seed=args.seed,
+                          save_every=args.save_every, ablations=args.ablation or [],
+                          overrides=args.set or [], workers=args.workers, progress=not args.json)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(f"trained {args.policy} for {result['steps']} steps "
+              f"(resumed from {result['resumed_from']}); checkpoint in {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmbench", description="RMBench: memory-dependent "
                                      "dual-arm manipulation on MuJoCo")
@@ -203,6 +218,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--instructions", choices=["seen", "unseen"], default="seen")
     _add_json(p)
     p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("train", help="train a learned policy on a dataset (resumes in --out)")
+    p.add_argument("policy", choices=["mem0"], help="which policy")
+    p.add_argument("--dataset", required=True, help="an rmbench dataset folder")
+    p.add_argument("--out", required=True, help="checkpoint folder (resumed if it exists)")
+    p.add_argument("--steps", type=int, default=3000)
+    p.add_argument("--batch-size", type=int, default=32)
+    p.add_argument("--device", default="cpu", help="cpu | cuda")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--save-every", type=int, default=500)
+    p.add_argument("--ablation", action="append",
+                   help="no_anchor | no_sliding | no_memory | no_key (repeatable)")
+    p.add_argument("--set", action="append", metavar="FIELD=VALUE",
+                   help="override a config field, VALUE as JSON (e.g. --set dim=64)")
+    p.add_argument("--workers", type=int, default=0, help="data-loading processes")
+    _add_json(p)
+    p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("report", help="tasks x policies table from evaluation folders")
     p.add_argument("dirs", nargs="+", metavar="DIR", help="rmbench eval output folders")

@@ -70,7 +70,9 @@ class DemoDataset(torch.utils.data.Dataset):
 
     def __init__(self, root: str | Path | Dataset, *, chunk: int = 30,
                  cameras: list[str] | None = None, image_size: tuple[int, int] | None = None,
-                 episodes: list[int] | None = None, cache_dir: str | Path | None = None):
+                 episodes: list[int] | None = None, cache_dir: str | Path | None = None,
+                 stride: int = 1):
+        self.stride = stride
         self.ds = root if isinstance(root, Dataset) else Dataset(root)
         if chunk < 1:
             raise ValueError(f"chunk must be at least 1, got {chunk}")
@@ -108,7 +110,8 @@ class DemoDataset(torch.utils.data.Dataset):
             "task_index": torch.tensor(self.task_index[k]),
             "episode_index": torch.tensor(ep.index),
             "frame_index": torch.tensor(t),
-            "episode_start": torch.tensor(t == 0),
+            # the first frame a walk with this stride visits (EpisodeOrderSampler's phase)
+            "episode_start": torch.tensor(t < self.stride),
         }
         for cam in self.cameras:
             frame = self.cache.frames(self.episode_ids[k], cam)[t]
@@ -121,19 +124,25 @@ class EpisodeOrderSampler(Sampler[list[int]]):
     frame, so a per-slot memory carried across batches is what the policy would hold at run
     time. When a slot's episode ends the slot starts the next episode of a shuffled queue (its
     first item has ``episode_start`` set: clear the slot's memory there). Batches mix episodes at
-    different time steps. Deterministic for a given ``seed`` and epoch (``set_epoch``)."""
+    different time steps. Deterministic for a given ``seed`` and epoch (``set_epoch``).
 
-    def __init__(self, dataset: DemoDataset, batch_size: int, shuffle: bool = True, seed: int = 0):
-        if batch_size < 1:
-            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+    With ``stride`` s a slot visits every s-th frame of its episode from a random phase in
+    [0, s), for memories written every s control steps; give the DemoDataset the same
+    ``stride`` so that the phase's frame is the one marked ``episode_start``."""
+
+    def __init__(self, dataset: DemoDataset, batch_size: int, shuffle: bool = True, seed: int = 0,
+                 stride: int = 1):
+        if batch_size < 1 or stride < 1:
+            raise ValueError(f"batch_size and stride must be at least 1, got {batch_size}, {stride}")
         self.starts, self.lengths = dataset.starts[:-1], dataset.lengths
         self.batch_size, self.shuffle, self.seed, self.epoch = batch_size, shuffle, seed, 0
+        self.stride = stride
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = epoch
 
     def __len__(self) -> int:
-        return int(self.lengths.sum()) // self.batch_size
+        return int(self.lengths.sum()) // (self.batch_size * self.stride)
 
     def __iter__(self) -> Iterator[list[int]]:
         rng = np.random.default_rng([self.seed, self.epoch])
@@ -144,13 +153,19 @@ class EpisodeOrderSampler(Sampler[list[int]]):
                 yield from (rng.permutation(n) if self.shuffle else range(n))
 
         episodes = queue()
-        slots = [[int(next(episodes)), 0] for _ in range(self.batch_size)]
+
+        def start() -> list[int]:
+            e = int(next(episodes))
+            phase = int(rng.integers(self.stride)) if self.stride > 1 else 0
+            return [e, min(phase, int(self.lengths[e]) - 1)]
+
+        slots = [start() for _ in range(self.batch_size)]
         for _ in range(len(self)):
             batch = []
             for slot in slots:
                 e, t = slot
                 batch.append(int(self.starts[e] + t))
-                slot[1] += 1
+                slot[1] += self.stride
                 if slot[1] >= self.lengths[e]:
-                    slot[0], slot[1] = int(next(episodes)), 0
+                    slot[:] = start()
             yield batch

@@ -75,6 +75,11 @@ class RMBenchEnv(gym.Env):
         return {"task": t.name, "gym_id": t.gym_id, "tmc": t.tmc, "step_limit": self.step_limit,
                 "subtasks": list(t.subtasks)}
 
+    @property
+    def subtask_stage(self) -> int:
+        """How many of the task's subtasks are done (the ground truth behind subtask_end)."""
+        return self._last.stage if self._last is not None else 0
+
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         sim, task = self.sim, self.task

@@ -82,3 +82,13 @@ register_policy("noop", "hold the current joint positions", cameras=())(
     lambda arg, env: NoopPolicy())
 register_policy("replay", "replay a dataset's recorded actions on its own seeds",
                 needs_argument=True, cameras=())(lambda arg, env: ReplayPolicy(arg, env))
+
+
+def _mem0(arg, env):
+    from rmbench.policies.mem0.agent import Mem0Policy  # torch only when asked for
+
+    return Mem0Policy(arg, env)
+
+
+register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=gt_classifier,...]",
+                needs_argument=True)(_mem0)

@@ -1,0 +1,81 @@
+"""Policy checkpoints: a folder with ``model.safetensors`` (weights, normalisation included)
+and ``config.json`` (what builds the model: the policy's name, its config, the texts and
+cameras it was trained with, and the training step).
+
+Both are written atomically, weights first; the step is stored in both, so a reader can tell a
+pair torn by a crash. Nothing is unpickled: weights are safetensors, the rest is JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+from typing import Any
+
+import torch
+from safetensors import SafetensorError
+from safetensors.torch import load as load_bytes
+from safetensors.torch import save as save_bytes
+
+from rmbench.video import write_atomic
+
+FORMAT = 1
+WEIGHTS, CONFIG = "model.safetensors", "config.json"
+
+
+class CheckpointError(ValueError):
+    pass
+
+
+def save_checkpoint(folder: str | Path, model: torch.nn.Module, config: dict[str, Any],
+                    step: int) -> None:
+    folder = Path(folder)
+    state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+    write_atomic(folder / WEIGHTS, save_bytes(state, metadata={"step": str(step)}))
+    write_atomic(folder / CONFIG,
+                 (json.dumps({**config, "format": FORMAT, "step": step}, indent=2) + "\n").encode())
+
+
+def read_config(folder: str | Path, policy: str | None = None) -> dict[str, Any]:
+    path = Path(folder) / CONFIG
+    if not path.is_file():
+        raise CheckpointError(f"{folder}: not a checkpoint (no {CONFIG})")
+    try:
+        config = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise CheckpointError(f"{path}: unreadable ({err})") from None
+    if config.get("format") != FORMAT:
+        raise CheckpointError(f"{path}: checkpoint format {config.get('format')!r}, expected {FORMAT}")
+    if policy is not None and config.get("policy") != policy:
+        raise CheckpointError(f"{folder} is a {config.get('policy')!r} checkpoint, not {policy!r}")
+    return config
+
+
+def load_weights(folder: str | Path, model: torch.nn.Module, step: int) -> None:
+    path = Path(folder) / WEIGHTS
+    try:
+        data = path.read_bytes()
+        state = load_bytes(data)
+        saved_step = int(_metadata(data).get("step", -1))
+    except FileNotFoundError:
+        raise CheckpointError(f"{folder}: no {WEIGHTS}") from None
+    except (SafetensorError, ValueError, OSError, struct.error) as err:
+        raise CheckpointError(f"{path}: corrupt weights ({err})") from None
+    if saved_step != step:
+        raise CheckpointError(f"{folder}: weights of step {saved_step} beside a config of step "
+                              f"{step} (a save was interrupted); re-run training to resume")
+    missing, unexpected = set(model.state_dict()) - set(state), set(state) - set(model.state_dict())
+    if missing or unexpected:
+        raise CheckpointError(f"{path}: weights do not fit the model (missing {sorted(missing)[:3]}, "
+                              f"unexpected {sorted(unexpected)[:3]})")
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as err:
+        raise CheckpointError(f"{path}: {str(err).splitlines()[0]}") from None
+
+
+def _metadata(data: bytes) -> dict[str, str]:
+    """The safetensors header's ``__metadata__``: 8 bytes of length, then a JSON header."""
+    (n,) = struct.unpack("<Q", data[:8])
+    return json.loads(data[8:8 + n]).get("__metadata__") or {}

@@ -1,0 +1,64 @@
+"""The action head: a transformer that denoises a chunk of H actions by flow matching
+(rectified flow), conditioned on context tokens (Mem-0's c_t and the state).
+
+Training draws t ~ U(0, 1) and noise e, forms x_t = t a + (1 - t) e and regresses the velocity
+a - e. Sampling integrates dx/dt from noise at t = 0 to t = 1 in ``steps`` Euler steps; the
+noise comes from the caller's generator, so a seeded episode samples the same chunks.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+
+def time_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
+    half = dim // 2
+    freqs = torch.exp(-math.log(1000.0) * torch.arange(half, device=t.device) / half)
+    angles = t[:, None].float() * 1000.0 * freqs[None]
+    return torch.cat([angles.sin(), angles.cos()], -1)
+
+
+class FlowMatchingHead(nn.Module):
+    def __init__(self, dim: int, horizon: int, action_dim: int, layers: int, heads: int):
+        super().__init__()
+        self.dim, self.horizon, self.action_dim = dim, horizon, action_dim
+        self.inp = nn.Linear(action_dim, dim)
+        self.pos = nn.Parameter(torch.randn(horizon, dim) * 0.02)
+        self.time = nn.Sequential(nn.Linear(dim, dim), nn.SiLU(), nn.Linear(dim, dim))
+        layer = nn.TransformerEncoderLayer(dim, heads, 4 * dim, dropout=0.0, activation="gelu",
+                                           batch_first=True, norm_first=True)
+        self.blocks = nn.TransformerEncoder(layer, layers, enable_nested_tensor=False)
+        self.norm = nn.LayerNorm(dim)
+        self.out = nn.Linear(dim, action_dim)
+
+    def velocity(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        """x (B, H, A) at times t (B,), context tokens cond (B, N, d) -> (B, H, A)."""
+        tokens = torch.cat([cond, self.time(time_embedding(t, self.dim))[:, None],
+                            self.inp(x) + self.pos], 1)
+        return self.out(self.norm(self.blocks(tokens)[:, -self.horizon:]))
+
+    def loss(self, cond: torch.Tensor, actions: torch.Tensor, is_pad: torch.Tensor,
+             generator: torch.Generator | None = None) -> torch.Tensor:
+        """Mean squared velocity error over the chunk's real (not padded) steps."""
+        b = actions.shape[0]
+        noise = torch.randn(actions.shape, generator=generator, device="cpu").to(actions.device)
+        t = torch.rand(b, generator=generator, device="cpu").to(actions.device)
+        x = t[:, None, None] * actions + (1 - t[:, None, None]) * noise
+        err = F.mse_loss(self.velocity(x, t, cond), actions - noise, reduction="none").mean(-1)
+        keep = (~is_pad).float()
+        return (err * keep).sum() / keep.sum().clamp(min=1)
+
+    @torch.no_grad()
+    def sample(self, cond: torch.Tensor, steps: int,
+               generator: torch.Generator | None = None) -> torch.Tensor:
+        b = cond.shape[0]
+        x = torch.randn(b, self.horizon, self.action_dim, generator=generator,
+                        device="cpu").to(cond.device)
+        for i in range(steps):
+            t = torch.full((b,), i / steps, device=cond.device)
+            x = x + self.velocity(x, t, cond) / steps
+        return x

@@ -1,0 +1,155 @@
+"""``--policy mem0:CKPT[?ablation=A,B]``: Mem-0's closed loop.
+
+Every step: encode the frame; at a subtask's first step the anchor is set and the sliding
+window emptied; c_t from the memories; a new chunk of H actions when the last D are used; the
+end classifier's debounced verdict (or, with gt_classifier, the simulator's subtask boundary).
+When a subtask ends its text and end frame go to key memory and the planner names the next
+one. M(1) tasks run as one subtask, the goal: no planner, no classifier.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qsl
+
+import numpy as np
+import torch
+
+from rmbench.data.torch_dataset import resize
+from rmbench.policies.base import BasePolicy
+from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
+from rmbench.policies.mem0.classifier import Debounce
+from rmbench.policies.mem0.config import ABLATIONS, TRAINED_ABLATIONS, Mem0Config
+from rmbench.policies.mem0.memory import MemoryStore
+from rmbench.policies.mem0.planner import DONE
+from rmbench.policies.mem0.train import build_model, goal_text
+
+
+def parse_argument(arg: str) -> tuple[Path, tuple[str, ...]]:
+    path, _, query = arg.partition("?")
+    options = dict(parse_qsl(query))
+    ablations = tuple(a for a in options.pop("ablation", "").split(",") if a)
+    if options:
+        raise ValueError(f"unknown mem0 option(s) {sorted(options)}; options: ablation")
+    unknown = set(ablations) - set(ABLATIONS)
+    if unknown:
+        raise ValueError(f"unknown ablation {sorted(unknown)}; ablations: {', '.join(ABLATIONS)}")
+    return Path(path), ablations
+
+
+def load_mem0(path: str | Path, ablations: tuple[str, ...] = ()):
+    """(model, config, describe) from a checkpoint; inference ablations added."""
+    describe = read_config(path, "mem0")
+    cfg = Mem0Config.from_dict(describe["config"])
+    missing = [a for a in ablations if a in TRAINED_ABLATIONS and a not in cfg.ablations]
+    if missing:
+        raise CheckpointError(f"{path} was trained without {missing[0]}, which changes training: "
+                              f"rmbench train mem0 --ablation {missing[0]}")
+    cfg = replace(cfg, ablations=tuple(dict.fromkeys(cfg.ablations + ablations)))
+    model = build_model(cfg, describe)
+    load_weights(path, model, describe["step"])
+    model.eval()
+    return model, cfg, describe
+
+
+class Mem0Policy(BasePolicy):
+    def __init__(self, arg: str, env=None):
+        path, ablations = parse_argument(arg)
+        self.model, self.cfg, self.describe = load_mem0(path, ablations)
+        self.cameras = self.cfg.cameras
+        self.env = env.unwrapped if env is not None else None
+        if self.env is not None and type(self.env.task).name != self.describe["task"]:
+            raise CheckpointError(f"{path} was trained on {self.describe['task']}, not "
+                                  f"{type(self.env.task).name}")
+        if self.cfg.gt_classifier and self.env is None:
+            raise ValueError("gt_classifier reads the simulator's subtask boundary: it cannot be "
+                             "served remotely")
+        self.decompose = self.describe["tmc"] == "M(n)"
+        self.goal = self.describe["executor_texts"].index(goal_text(self.describe["task"]))
+        self.done = self.describe["planner_texts"].index(DONE)
+        self.planner_cams = [self.cfg.cameras.index(c) for c in self.cfg.planner_cameras]
+        self.reset("", {})
+
+    # ----------------------------------------------------------------- interface
+    def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
+        cfg = self.cfg
+        self.generator = torch.Generator().manual_seed(int(task_info.get("seed", 0)))
+        self.memory = MemoryStore(1, len(cfg.cameras), cfg.sliding_window, cfg.dim)
+        self.debounce = Debounce(cfg.end_window)
+        self.t = 0
+        self.queue: list[np.ndarray] = []
+        self.first: torch.Tensor | None = None  # planner embedding of o_0
+        self.keys: list[tuple[int, torch.Tensor]] = []
+        self.subtask = self.goal
+        self.start_subtask = True
+        self.stage = 0
+        self.log: list[tuple[int, str]] = []  # (step, subtask started) for inspection
+
+    @torch.no_grad()
+    def act(self, observation: dict[str, Any]) -> np.ndarray:
+        cfg, ex = self.cfg, self.model.executor
+        images = self.images(observation)
+        tokens, z = ex.encode(images)
+        if self.t == 0 and self.decompose:
+            self.first = self.model.planner.embed([images[i] for i in self.planner_cams])
+            self.subtask = self.plan(self.first)
+        if self.start_subtask:
+            self.memory.reset(torch.ones(1, dtype=torch.bool), tokens)
+            self.queue, self.start_subtask = [], False
+            self.log.append((self.t, self.describe["executor_texts"][self.subtask]))
+        c = ex.context(z, self.memory, torch.tensor([self.subtask]))
+        if self.t % cfg.memory_every == 0:
+            self.memory.push(z)
+        if not self.queue:
+            state = torch.as_tensor(np.asarray(observation["agent_pos"]), dtype=torch.float32)[None]
+            chunk = ex.normalizer.unaction(ex.head.sample(ex.condition(c, state), cfg.flow_steps,
+                                                          self.generator))
+            self.queue = list(chunk[0, :cfg.execute].double().numpy())
+        action = self.queue.pop(0)
+        if self.decompose and self.ended(c):
+            self.subtask_ended(images)
+        self.t += 1
+        return action
+
+    # ------------------------------------------------------------------ helpers
+    def images(self, observation: dict[str, Any]) -> list[torch.Tensor]:
+        out = []
+        for cam in self.cfg.cameras:
+            frame = np.asarray(observation["pixels"][cam])
+            if frame.shape[:2] != tuple(self.cfg.image_size):
+                frame = resize(frame[None], tuple(self.cfg.image_size))[0]
+            out.append(torch.from_numpy(np.ascontiguousarray(frame)).permute(2, 0, 1)[None])
+        return out
+
+    def ended(self, c: torch.Tensor) -> bool:
+        if self.cfg.gt_classifier:
+            stage = self.env.subtask_stage
+            ended, self.stage = stage > self.stage, max(stage, self.stage)
+            return ended
+        p = torch.sigmoid(self.model.executor.end_logit(c))[0].item()
+        return self.debounce.update(p > self.cfg.end_threshold)
+
+    def subtask_ended(self, images: list[torch.Tensor]) -> None:
+        planner = self.model.planner
+        frame = planner.embed([images[i] for i in self.planner_cams])
+        self.keys.append((self.subtask, frame[0]))
+        nxt = self.plan(frame if not self.cfg.use_key else self.first)
+        if nxt != self.done:
+            self.subtask, self.start_subtask = nxt, True
+        self.debounce.reset()
+
+    def plan(self, first: torch.Tensor) -> int:
+        planner = self.model.planner
+        if self.keys and self.cfg.use_key:
+            keys = torch.stack([f for _, f in self.keys])[None]
+            text = torch.tensor([[s for s, _ in self.keys]])
+            valid = torch.ones(1, len(self.keys), dtype=torch.bool)
+        else:
+            keys, text = torch.zeros(1, 0, self.cfg.dim), torch.zeros(1, 0, dtype=torch.long)
+            valid = torch.zeros(1, 0, dtype=torch.bool)
+        logits = planner(first, keys, text, valid)[0]
+        if not self.keys:
+            logits[self.done] = -torch.inf  # an episode starts with a subtask
+        return int(logits.argmax())

@@ -1,0 +1,120 @@
+"""Mem-0's settings: one frozen dataclass, stored in every checkpoint."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+# Ablations that change what is trained (a checkpoint is trained with them) and those that
+# only change inference (any checkpoint can run them).
+TRAINED_ABLATIONS = ("no_anchor", "no_sliding", "no_memory", "no_key")
+INFERENCE_ABLATIONS = ("gt_classifier",)
+ABLATIONS = TRAINED_ABLATIONS + INFERENCE_ABLATIONS
+
+
+@dataclass(frozen=True)
+class Mem0Config:
+    # --- observation
+    cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
+    """Cameras the executor reads, each through its own CNN."""
+    image_size: tuple[int, int] = (96, 128)
+    """(height, width) the frames are resized to (4:3 like the 320x240 recordings)."""
+    # --- encoder
+    dim: int = 128
+    """Width of every token: z_img, z_text, memory entries, the action head."""
+    encoder_channels: tuple[int, ...] = (32, 64, 128, 128)
+    """CNN stage widths; each stage halves the resolution."""
+    keypoints: int = 32
+    """Spatial-softmax keypoints per camera, pooled beside the channel mean."""
+    # --- memory
+    sliding_window: int = 8
+    """K: sliding memory holds the last K z_img."""
+    memory_every: int = 5
+    """z_img enters the sliding memory every this many control steps (at 20 Hz, K=8 spans 2 s);
+    training walks each episode with this stride so it sees the memory inference builds."""
+    heads: int = 4
+    """Attention heads in the memory fusion and the action head."""
+    # --- action head
+    horizon: int = 30
+    """H: actions predicted per chunk."""
+    execute: int = 10
+    """D: actions executed from each chunk before predicting again (1 <= D <= H)."""
+    head_layers: int = 4
+    """Transformer layers of the flow-matching action head."""
+    flow_steps: int = 10
+    """Euler integration steps when sampling a chunk."""
+    # --- end classifier
+    end_window: int = 8
+    """L: a subtask ends after L consecutive positive steps; the last L frames of each
+    subtask are the classifier's positives in training."""
+    end_threshold: float = 0.5
+    classifier_weight: float = 1.0
+    """Weight of the end classifier's loss beside the action loss."""
+    # --- planner
+    planner_cameras: tuple[str, ...] = ("head",)
+    """Cameras the planner sees for o_0 and the key memory's end frames."""
+    planner_layers: int = 2
+    planner_steps: int = 1500
+    planner_batch: int = 16
+    planner_lr: float = 1e-4
+    # --- optimisation (the shared loop's TrainConfig holds steps, batch, clip, decay)
+    lr_head: float = 1e-4
+    """Heads, fusion and classifier (published: 1e-4, min 5e-6)."""
+    min_lr_head: float = 5e-6
+    lr_backbone: float = 1e-4
+    """CNN encoders. Published 1e-5 is for a pretrained backbone; ours trains from scratch."""
+    min_lr_backbone: float = 1e-6
+    jitter: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    """Colour jitter (brightness, contrast, saturation) in training; hue is not jittered."""
+    # --- ablations
+    ablations: tuple[str, ...] = ()
+    """Any of no_anchor, no_sliding, no_memory, no_key (trained) and gt_classifier (inference)."""
+
+    def __post_init__(self):
+        for name in ("cameras", "image_size", "encoder_channels", "jitter", "planner_cameras",
+                     "ablations"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        unknown = set(self.ablations) - set(ABLATIONS)
+        if unknown:
+            raise ValueError(f"unknown ablation {sorted(unknown)}; ablations: {', '.join(ABLATIONS)}")
+        if not self.cameras:
+            raise ValueError("Mem-0 needs at least one camera")
+        if not set(self.planner_cameras) <= set(self.cameras):
+            raise ValueError(f"planner cameras {self.planner_cameras} must be among {self.cameras}")
+        if not 1 <= self.execute <= self.horizon:
+            raise ValueError(f"execute (D={self.execute}) must be in [1, horizon={self.horizon}]")
+        if self.dim % self.heads:
+            raise ValueError(f"dim {self.dim} must be divisible by heads {self.heads}")
+        for name in ("sliding_window", "memory_every", "end_window", "flow_steps", "head_layers"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1")
+
+    @property
+    def use_anchor(self) -> bool:
+        return not {"no_anchor", "no_memory"} & set(self.ablations)
+
+    @property
+    def use_sliding(self) -> bool:
+        return not {"no_sliding", "no_memory"} & set(self.ablations)
+
+    @property
+    def use_key(self) -> bool:
+        return "no_key" not in self.ablations
+
+    @property
+    def gt_classifier(self) -> bool:
+        return "gt_classifier" in self.ablations
+
+    def trained_ablations(self) -> tuple[str, ...]:
+        return tuple(a for a in self.ablations if a in TRAINED_ABLATIONS)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, raw: dict[str, Any]) -> Mem0Config:
+        known = {f.name for f in fields(cls)}
+        unknown = set(raw) - known
+        if unknown:
+            raise ValueError(f"unknown Mem-0 config fields {sorted(unknown)}")
+        return cls(**raw)

@@ -1,0 +1,151 @@
+"""Mem-0's executor: encoder -> anchor and sliding memory fusion -> c_t -> flow-matching action
+head and subtask-end classifier.
+
+    tokens_t = [CNN_cam(o_t^cam) + e_cam]            one token per camera
+    z_img    = mean(tokens_t)                        z_text = text table[s_t]
+    a_t      = Fuse_A(z_img, anchor tokens)          (z_img with no_anchor / no_memory)
+    s_t      = Fuse_S(z_img, last K z_img)           (z_img with no_sliding / no_memory)
+    c_t      = [a_t; s_t; z_text]
+    actions  ~ FlowHead(c_t, state)                  P(end) = MLP(c_t)
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from rmbench.policies.mem0.action_head import FlowMatchingHead
+from rmbench.policies.mem0.config import Mem0Config
+from rmbench.policies.mem0.memory import MemoryFusion, MemoryStore
+from rmbench.policies.mem0.planner import Planner
+from rmbench.policies.nn.normalize import Normalizer
+from rmbench.policies.nn.text import TextTable
+from rmbench.policies.nn.vision import ImageEncoder
+
+ACTION_DIM = 14
+
+
+class Executor(nn.Module):
+    def __init__(self, cfg: Mem0Config, texts: list[str], text_vectors: torch.Tensor | None):
+        super().__init__()
+        self.cfg = cfg
+        d = cfg.dim
+        self.encoders = nn.ModuleList(ImageEncoder(d, cfg.encoder_channels, cfg.keypoints)
+                                      for _ in cfg.cameras)
+        self.camera_embed = nn.Parameter(torch.randn(len(cfg.cameras), d) * 0.02)
+        self.text = TextTable(texts, d, text_vectors)
+        self.anchor_fusion = MemoryFusion(d, cfg.heads, len(cfg.cameras))
+        self.sliding_fusion = MemoryFusion(d, cfg.heads, cfg.sliding_window)
+        self.state_proj = nn.Linear(ACTION_DIM, d)
+        self.head = FlowMatchingHead(d, cfg.horizon, ACTION_DIM, cfg.head_layers, cfg.heads)
+        self.classifier = nn.Sequential(nn.Linear(3 * d, d), nn.GELU(), nn.Linear(d, 1))
+        self.normalizer = Normalizer(ACTION_DIM)
+
+    def encode(self, images: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-camera uint8 (B, 3, H, W) -> tokens (B, C, d) and z_img (B, d)."""
+        tokens = torch.stack([enc(img) for enc, img in zip(self.encoders, images, strict=True)], 1)
+        tokens = tokens + self.camera_embed
+        return tokens, tokens.mean(1)
+
+    def context(self, z: torch.Tensor, memory: MemoryStore, text: torch.Tensor) -> torch.Tensor:
+        """c_t as three tokens (B, 3, d): anchor-fused, sliding-fused, z_text."""
+        a = self.anchor_fusion(z, memory.anchor) if self.cfg.use_anchor else z
+        s = self.sliding_fusion(z, memory.sliding, memory.valid) if self.cfg.use_sliding else z
+        return torch.stack([a, s, self.text(text)], 1)
+
+    def condition(self, c: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        return torch.cat([c, self.state_proj(self.normalizer.state(state))[:, None]], 1)
+
+    def end_logit(self, c: torch.Tensor) -> torch.Tensor:
+        return self.classifier(c.flatten(1))[:, 0]
+
+    def backbone_parameters(self) -> list[nn.Parameter]:
+        return list(self.encoders.parameters())
+
+
+class Mem0Model(nn.Module):
+    """What a checkpoint holds: the executor and the planner."""
+
+    def __init__(self, cfg: Mem0Config, executor_texts: list[str], planner_texts: list[str],
+                 text_vectors: dict[str, torch.Tensor] | None):
+        super().__init__()
+        self.cfg = cfg
+        vec = text_vectors or {}
+        self.executor = Executor(cfg, executor_texts, vec.get("executor"))
+        self.planner = Planner(cfg, planner_texts, vec.get("planner"))
+
+
+class Mem0Trainer(nn.Module):
+    """The executor's training step over episode-ordered batches: one memory slot per batch
+    slot, reset at episode starts and (for M(n) tasks) at subtask changes."""
+
+    def __init__(self, model: Mem0Model, batch_size: int, decompose: bool, seed: int):
+        super().__init__()
+        self.model = model
+        self.decompose = decompose
+        cfg = model.cfg
+        self.memory = MemoryStore(batch_size, len(cfg.cameras), cfg.sliding_window, cfg.dim)
+        self.last_subtask = torch.full((batch_size,), -1, dtype=torch.long)
+        self.generator = torch.Generator().manual_seed(seed)
+        for p in model.planner.parameters():
+            p.requires_grad_(False)
+
+    def to(self, *args, **kwargs):  # the memory store follows the model's device
+        super().to(*args, **kwargs)
+        device = next(self.model.parameters()).device
+        m = self.memory
+        m.anchor, m.sliding, m.valid = m.anchor.to(device), m.sliding.to(device), m.valid.to(device)
+        self.last_subtask = self.last_subtask.to(device)
+        return self
+
+    def param_groups(self) -> list[dict]:
+        ex, cfg = self.model.executor, self.model.cfg
+        backbone = {id(p) for p in ex.backbone_parameters()}
+        return [{"name": "backbone", "params": ex.backbone_parameters(), "lr": cfg.lr_backbone,
+                 "min_lr": cfg.min_lr_backbone},
+                {"name": "heads", "params": [p for p in ex.parameters() if id(p) not in backbone],
+                 "lr": cfg.lr_head, "min_lr": cfg.min_lr_head}]
+
+    def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
+        from rmbench.data import layout as L
+        from rmbench.policies.nn.vision import color_jitter
+
+        ex, cfg = self.model.executor, self.model.cfg
+        images = [batch[L.image_key(cam)] for cam in cfg.cameras]
+        if any(cfg.jitter):
+            images = [color_jitter(img, self.generator, *cfg.jitter) for img in images]
+        tokens, z = ex.encode(images)
+        subtask = batch[L.SUBTASK_INDEX]
+        reset = batch["episode_start"].bool()
+        if self.decompose:
+            reset = reset | (subtask != self.last_subtask)
+        self.memory.reset(reset, tokens)
+        self.last_subtask = subtask.clone()
+        c = ex.context(z, self.memory, batch["text_index"])
+        self.memory.push(z)
+        target = ex.normalizer.action(batch[L.ACTION])
+        action_loss = ex.head.loss(ex.condition(c, batch[L.STATE]), target,
+                                   batch["action_is_pad"], self.generator)
+        logs = {"loss/action": float(action_loss)}
+        loss = action_loss
+        if self.decompose:
+            label = batch["end_label"].float()
+            pos = label.sum().clamp(min=1)
+            end_loss = F.binary_cross_entropy_with_logits(
+                ex.end_logit(c), label, pos_weight=((len(label) - pos) / pos).clamp(max=50))
+            loss = loss + cfg.classifier_weight * end_loss
+            logs["loss/end"] = float(end_loss)
+        return loss, logs
+
+    def extra_state(self) -> dict:
+        return {"memory": self.memory.state(), "last_subtask": self.last_subtask,
+                "generator": self.generator.get_state()}
+
+    def load_extra_state(self, state: dict) -> None:
+        self.memory.load_state(state["memory"])
+        self.last_subtask.copy_(state["last_subtask"])
+        self.generator.set_state(state["generator"].cpu())
+
+    def export_module(self) -> Mem0Model:
+        return self.model

@@ -1,0 +1,174 @@
+"""``rmbench train mem0``: the planner on (key memory -> next subtask) decisions, then the
+executor on episode-ordered batches, from one dataset of one task."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from rmbench.data import layout as L
+from rmbench.data.reader import Dataset
+from rmbench.data.stats import from_json
+from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
+from rmbench.policies.mem0.classifier import end_labels
+from rmbench.policies.mem0.config import Mem0Config
+from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
+from rmbench.policies.mem0.planner import DONE, planner_examples, planner_loss
+from rmbench.policies.nn.normalize import Normalizer
+from rmbench.policies.nn.text import sentence_embeddings
+from rmbench.policies.nn.vision import color_jitter
+from rmbench.tasks import get_task
+from rmbench.training.batches import batch_stream
+from rmbench.training.loop import STATE, TrainConfig, lr_at, train
+from rmbench.video import write_atomic
+
+log = logging.getLogger(__name__)
+
+
+def goal_text(task: str) -> str:
+    """M(1) tasks run as one subtask, the goal: the task's first seen instruction."""
+    return get_task(task).instructions_seen[0]
+
+
+class Mem0Frames(DemoDataset):
+    """DemoDataset items plus what the executor trains on: the text of the frame's subtask
+    (the goal for M(1) tasks) and the end classifier's label."""
+
+    def __init__(self, ds: Dataset, cfg: Mem0Config, decompose: bool, goal_index: int, **kw):
+        super().__init__(ds, chunk=cfg.horizon, cameras=list(cfg.cameras),
+                         image_size=cfg.image_size, stride=cfg.memory_every, **kw)
+        self.decompose, self.goal_index = decompose, goal_index
+        self.labels = [end_labels(ep.subtask_index, cfg.end_window) for ep in self.low_dim]
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        item = super().__getitem__(i)
+        k, t = self.locate(int(i))
+        item["text_index"] = (item[L.SUBTASK_INDEX].clone() if self.decompose
+                              else torch.tensor(self.goal_index))
+        item["end_label"] = torch.tensor(bool(self.labels[k][t]))
+        return item
+
+
+def build_model(cfg: Mem0Config, describe: dict[str, Any], text_vectors=None) -> Mem0Model:
+    if text_vectors is None and describe["text_encoder"] == "minilm":  # filled by the weights
+        text_vectors = {k: torch.zeros(len(describe[f"{k}_texts"]), 384)
+                        for k in ("executor", "planner")}
+    return Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], text_vectors)
+
+
+def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg: TrainConfig,
+               progress: bool = True, workers: int = 0) -> dict[str, Any]:
+    ds = Dataset(dataset)
+    task = get_task(ds.task)
+    decompose = task.tmc == "M(n)"
+    goal = goal_text(task.name)
+    executor_texts = list(ds.subtasks) + [goal]
+    planner_texts = list(ds.subtasks) + [DONE]
+    vectors = sentence_embeddings(executor_texts + planner_texts)
+    describe = {
+        "policy": "mem0", "config": cfg.to_dict(), "task": task.name, "tmc": task.tmc,
+        "executor_texts": executor_texts, "planner_texts": planner_texts,
+        "text_encoder": "learned" if vectors is None else "minilm",
+        "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
+                    "frames": ds.num_frames},
+    }
+    if vectors is not None:
+        vectors = {"executor": vectors[:len(executor_texts)],
+                   "planner": vectors[len(executor_texts):]}
+    torch.manual_seed(train_cfg.seed)
+    model = build_model(cfg, describe, vectors)
+    stats = from_json(json.loads((ds.root / L.STATS).read_text()))
+    model.executor.normalizer.load_state_dict(Normalizer.from_stats(stats).state_dict())
+    out = Path(out)
+    planner_report = None
+    if decompose and not (out / STATE).exists():
+        planner_report = fit_planner(model, ds, cfg, train_cfg, progress)
+    trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed)
+    frames = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
+
+    def batches(start: int, rank: int, world: int):
+        sampler = EpisodeOrderSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank,
+                                      stride=cfg.memory_every)
+        return batch_stream(frames, sampler, start, workers)
+
+    result = train(trainer, batches, train_cfg, out, describe, progress)
+    if planner_report is not None:
+        write_atomic(out / "training" / "planner.json",
+                     (json.dumps(planner_report, indent=2) + "\n").encode())
+    return result
+
+
+def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: TrainConfig,
+                progress: bool) -> dict[str, Any]:
+    """Train the planner on every decision of every demonstration (a few hundred): first
+    subtask, each next one, then done."""
+    planner = model.planner
+    done = len(planner.text.texts) - 1
+    examples = [x for e in range(ds.num_episodes)
+                for x in planner_examples(e, ds.episode(e, cameras=[]).subtask_index, done)]
+    cache = FrameCache(ds, cfg.image_size)
+    gen = torch.Generator().manual_seed(train_cfg.seed)
+    device = torch.device("cuda" if train_cfg.device.startswith("cuda") else "cpu")
+    planner.to(device)
+    opt = torch.optim.AdamW(planner.parameters(), lr=cfg.planner_lr, betas=(0.9, 0.999),
+                            weight_decay=train_cfg.weight_decay)
+    rng = np.random.default_rng(train_cfg.seed)
+    acc_ema, loss_ema = 0.0, 0.0
+    for step in range(cfg.planner_steps):
+        picks = [examples[i] for i in rng.integers(len(examples), size=cfg.planner_batch)]
+        batch = planner_batch(planner, cache, cfg, picks, gen, device)
+        for g in opt.param_groups:
+            g["lr"] = lr_at(step, cfg.planner_steps, 0.1, cfg.planner_lr, cfg.planner_lr * 0.01)
+        loss, acc = planner_loss(planner, batch)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(planner.parameters(), train_cfg.grad_clip)
+        opt.step()
+        loss_ema = 0.98 * loss_ema + 0.02 * loss.item() if step else loss.item()
+        acc_ema = 0.98 * acc_ema + 0.02 * float(acc) if step else float(acc)
+        if progress and (step + 1) % 100 == 0:
+            log.info("planner step %d: loss %.4f, accuracy %.3f", step + 1, loss_ema, acc_ema)
+    planner.eval()
+    with torch.no_grad():
+        correct = 0
+        for i in range(0, len(examples), 32):
+            b = planner_batch(planner, cache, cfg, examples[i:i + 32], None, device)
+            correct += int((planner(b["first"], b["keys"], b["key_text"], b["key_valid"])
+                            .argmax(-1) == b["target"]).sum())
+    planner.train()
+    return {"decisions": len(examples), "steps": cfg.planner_steps,
+            "train_accuracy": round(correct / len(examples), 4), "final_loss": round(loss_ema, 5)}
+
+
+def planner_batch(planner, cache: FrameCache, cfg: Mem0Config, picks, gen, device) -> dict:
+    """Embedded frames for a list of PlannerExamples (jittered when ``gen`` is given)."""
+    cams = list(cfg.planner_cameras)
+    m = max(1, max(len(x.keys) for x in picks))
+
+    def frames(e: int, ts: list[int]) -> list[torch.Tensor]:
+        out = []
+        for cam in cams:
+            img = torch.from_numpy(np.array(cache.frames(e, cam)[ts])).permute(0, 3, 1, 2)
+            out.append(color_jitter(img, gen, *cfg.jitter) if gen is not None else img)
+        return out
+
+    firsts, keys, texts, valid = [], [], [], []
+    for x in picks:
+        # o_0 and the key frames; with no_key the current frame alone
+        ts = [0] + [f for _, f in x.keys] if planner.use_key else [x.current]
+        emb = planner.embed([f.to(device) for f in frames(x.episode, ts)])
+        firsts.append(emb[0])
+        k = torch.zeros(m, emb.shape[1], device=device)
+        k[:len(ts) - 1] = emb[1:]
+        keys.append(k)
+        texts.append(torch.tensor([s for s, _ in x.keys] + [0] * (m - len(x.keys))))
+        valid.append(torch.arange(m) < len(x.keys))
+    return {"first": torch.stack(firsts), "keys": torch.stack(keys),
+            "key_text": torch.stack(texts).to(device), "key_valid": torch.stack(valid).to(device),
+            "target": torch.tensor([x.target for x in picks], device=device)}
+

@@ -1,0 +1,46 @@
+"""What ``rmbench train POLICY`` runs: the policy's config from defaults, ``--ablation`` and
+``--set FIELD=VALUE`` overrides, then its training function."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import fields, replace
+from typing import Any
+
+from rmbench.training.loop import TrainConfig
+
+
+def parse_overrides(config_cls, items: list[str]) -> dict[str, Any]:
+    names = {f.name for f in fields(config_cls)}
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set takes FIELD=VALUE, got {item!r}")
+        if key not in names:
+            raise ValueError(f"unknown config field {key!r}; fields: {', '.join(sorted(names))}")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value  # a bare string
+    return out
+
+
+def run_training(policy: str, dataset: str, out: str, *, steps: int, batch_size: int, device: str,
+                 seed: int, save_every: int, ablations: list[str], overrides: list[str],
+                 workers: int = 0, progress: bool = True) -> dict[str, Any]:
+    train_cfg = TrainConfig(steps=steps, batch_size=batch_size, device=device, seed=seed,
+                            save_every=save_every)
+    if policy == "mem0":
+        from rmbench.policies.mem0.config import TRAINED_ABLATIONS, Mem0Config
+        from rmbench.policies.mem0.train import train_mem0
+
+        bad = [a for a in ablations if a not in TRAINED_ABLATIONS]
+        if bad:
+            raise ValueError(f"--ablation {bad[0]} is not a training ablation; training "
+                             f"ablations: {', '.join(TRAINED_ABLATIONS)} (gt_classifier is "
+                             f"chosen at evaluation: mem0:CKPT?ablation=gt_classifier)")
+        cfg = replace(Mem0Config(**parse_overrides(Mem0Config, overrides)),
+                      ablations=tuple(ablations))
+        return train_mem0(dataset, out, cfg, train_cfg, progress=progress, workers=workers)
+    raise ValueError(f"unknown policy {policy!r} to train; policies: mem0")

@@ -1,0 +1,253 @@
+"""The training loop every learned policy uses.
+
+A policy's trainable model implements ``forward(batch) -> (loss, logs)``, ``param_groups()``
+(named groups with their own learning rates), and optionally ``extra_state()`` /
+``load_extra_state()`` for what training carries besides weights (Mem-0's per-episode memory
+store) and ``after_step()`` (EMA). AdamW, cosine schedule with linear warm-up per group down to
+the group's minimum, gradient-norm clipping.
+
+Resume: ``OUT/training/state.pt`` holds weights, optimiser, RNG and extra state, written
+atomically; it is the commit point. A re-run with the same arguments continues from it and,
+batches being a function of the step, gives the weights an uninterrupted run gives.
+``OUT/model.safetensors`` + ``OUT/config.json`` (the inference checkpoint) and
+``OUT/training/loss.csv`` / ``loss.png`` are derived from it. Under torchrun each rank trains on
+its own episode stream and rank 0 writes.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import math
+import os
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+from tqdm import tqdm
+
+from rmbench.identity import differences
+from rmbench.policies.checkpoint import save_checkpoint
+from rmbench.video import write_atomic
+
+log = logging.getLogger(__name__)
+
+STATE = Path("training") / "state.pt"
+CURVE_CSV = Path("training") / "loss.csv"
+CURVE_PNG = Path("training") / "loss.png"
+
+
+class TrainingError(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """The optimisation settings shared by every policy (the published Mem-0 values where
+    they fit a CPU: AdamW (0.9, 0.999), weight decay 0.005, 5% warm-up, clip 2.5)."""
+
+    steps: int = 3000
+    batch_size: int = 32
+    weight_decay: float = 0.005
+    warmup: float = 0.05  # fraction of the steps
+    grad_clip: float = 2.5
+    save_every: int = 500
+    log_every: int = 10
+    seed: int = 0
+    device: str = "cpu"
+
+    def __post_init__(self):
+        if self.steps < 1 or self.batch_size < 1 or self.save_every < 1 or self.log_every < 1:
+            raise ValueError("steps, batch_size, save_every and log_every must be >= 1")
+        if not 0 <= self.warmup < 1:
+            raise ValueError(f"warmup is a fraction of the steps in [0, 1), got {self.warmup}")
+        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
+            raise ValueError(f"device must be cpu or cuda, got {self.device!r}")
+
+
+def lr_at(step: int, total: int, warmup: float, base: float, minimum: float) -> float:
+    """Linear warm-up over ``warmup * total`` steps, then cosine from ``base`` to ``minimum``."""
+    w = int(warmup * total)
+    if step < w:
+        return base * (step + 1) / w
+    progress = (step - w) / max(1, total - w)
+    return minimum + (base - minimum) * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
+
+
+@dataclass(frozen=True)
+class Dist:
+    rank: int = 0
+    world: int = 1
+    local_rank: int = 0
+
+    @classmethod
+    def from_env(cls) -> Dist:
+        return cls(int(os.environ.get("RANK", 0)), int(os.environ.get("WORLD_SIZE", 1)),
+                   int(os.environ.get("LOCAL_RANK", 0)))
+
+
+# (first step, rank, world) -> batches for that step onwards
+BatchSource = Callable[[int, int, int], Iterator[dict[str, torch.Tensor]]]
+
+
+def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | Path,
+          describe: dict[str, Any], progress: bool = True) -> dict[str, Any]:
+    """Train ``model`` for ``cfg.steps`` steps into ``out``; ``describe`` is what the
+    inference checkpoint's config.json holds (and what a resume must match)."""
+    out = Path(out)
+    dist = Dist.from_env()
+    if dist.world > 1 and not torch.distributed.is_initialized():
+        backend = "nccl" if cfg.device.startswith("cuda") else "gloo"
+        torch.distributed.init_process_group(backend)
+    device = torch.device(f"cuda:{dist.local_rank}" if cfg.device == "cuda" else cfg.device)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise TrainingError("--device cuda, but this torch has no CUDA device")
+    torch.manual_seed(cfg.seed + dist.rank)
+    model.to(device)
+    groups = model.param_groups()
+    opt = torch.optim.AdamW([{"params": g["params"], "lr": g["lr"], "name": g["name"],
+                              "base_lr": g["lr"], "min_lr": g["min_lr"]} for g in groups],
+                            betas=(0.9, 0.999), weight_decay=cfg.weight_decay)
+    identity = {"describe": describe, "train": asdict(cfg), "world": dist.world}
+    start = _resume(out, model, opt, identity, device)
+    if start >= cfg.steps:
+        log.info("%s: already trained for %d steps", out, start)
+        return {"steps": start, "resumed_from": start}
+    trainer = (torch.nn.parallel.DistributedDataParallel(model) if dist.world > 1 else model)
+    lead = dist.rank == 0
+    rows: list[dict[str, Any]] = []
+    stream = batches(start, dist.rank, dist.world)
+    bar = tqdm(total=cfg.steps, initial=start, unit="step", disable=not (progress and lead),
+               desc=f"train {describe.get('policy', '')}", dynamic_ncols=True)
+    t0, last_save = time.perf_counter(), start
+    model.train()
+    for step in range(start, cfg.steps):
+        batch = {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v
+                 for k, v in next(stream).items()}
+        for g in opt.param_groups:
+            g["lr"] = lr_at(step, cfg.steps, cfg.warmup, g["base_lr"], g["min_lr"])
+        loss, logs = trainer(batch)
+        if not torch.isfinite(loss):
+            raise TrainingError(f"step {step}: loss is {loss.item()} (logs {logs})")
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        opt.step()
+        if hasattr(model, "after_step"):
+            model.after_step()
+        if lead and (step + 1) % cfg.log_every == 0:
+            row = {"step": step + 1, "loss": float(loss), "grad_norm": float(grad_norm),
+                   **{f"lr/{g['name']}": g["lr"] for g in opt.param_groups},
+                   **{k: float(v) for k, v in logs.items()}}
+            rows.append(row)
+            bar.set_postfix(loss=f"{row['loss']:.4f}", refresh=False)
+        bar.update(1)
+        if (step + 1) % cfg.save_every == 0 or step + 1 == cfg.steps:
+            if lead:
+                _save(out, model, opt, identity, step + 1, rows)
+                rows = []
+            last_save = step + 1
+    bar.close()
+    if dist.world > 1:
+        torch.distributed.barrier()
+    return {"steps": cfg.steps, "resumed_from": start, "saved": last_save,
+            "wall_s": round(time.perf_counter() - t0, 1)}
+
+
+def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict, step: int,
+          rows: list[dict]) -> None:
+    state = {"step": step, "identity": json.dumps(identity, sort_keys=True),
+             "model": model.state_dict(), "optimizer": opt.state_dict(),
+             "rng": torch.get_rng_state(),
+             "extra": model.extra_state() if hasattr(model, "extra_state") else {}}
+    if torch.cuda.is_available():
+        state["cuda_rng"] = torch.cuda.get_rng_state_all()
+    buf = io.BytesIO()
+    torch.save(state, buf)
+    _append_curve(out, rows, step)
+    write_atomic(out / STATE, buf.getvalue())  # the commit point
+    export = model.export_module() if hasattr(model, "export_module") else model
+    save_checkpoint(out, export, identity["describe"], step)
+    _plot_curve(out)
+
+
+def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict,
+            device: torch.device) -> int:
+    path = out / STATE
+    if not path.exists():
+        if (out / "config.json").exists() or (out.exists() and any(out.iterdir())):
+            raise TrainingError(f"{out} exists and holds no training state; use another --out")
+        return 0
+    try:
+        state = torch.load(path, map_location=device, weights_only=True)
+    except Exception as err:
+        raise TrainingError(f"{path}: unreadable training state ({type(err).__name__}: "
+                            f"{str(err).splitlines()[0] if str(err) else ''})") from None
+    what = differences(json.loads(state["identity"]), identity)
+    if what:
+        raise TrainingError(f"{out} holds a training run with other arguments ({what}); "
+                            f"use another --out")
+    model.load_state_dict(state["model"])
+    opt.load_state_dict(state["optimizer"])
+    torch.set_rng_state(state["rng"].cpu())
+    if "cuda_rng" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
+    if hasattr(model, "load_extra_state"):
+        model.load_extra_state(state["extra"])
+    log.info("%s: resuming at step %d", out, state["step"])
+    return int(state["step"])
+
+
+def _append_curve(out: Path, rows: list[dict], step: int) -> None:
+    """Rows after ``step`` (logged by a run killed before it saved) are replaced."""
+    path = out / CURVE_CSV
+    old: list[dict] = []
+    if path.exists():
+        with open(path, newline="") as f:
+            first = rows[0]["step"] if rows else step + 1
+            old = [r for r in csv.DictReader(f) if int(r["step"]) < first]
+    allrows = old + rows
+    if not allrows:
+        return
+    fields = list(dict.fromkeys(k for r in allrows for k in r))
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fields)
+    writer.writeheader()
+    writer.writerows(allrows)
+    write_atomic(path, buf.getvalue().encode())
+
+
+def _plot_curve(out: Path) -> None:
+    path = out / CURVE_CSV
+    if not path.exists():
+        return
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        return
+    keys = [k for k in rows[0] if k == "loss" or k.startswith("loss/")]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    steps = [int(r["step"]) for r in rows]
+    for k in keys:
+        ax.plot(steps, [float(r[k]) for r in rows], label=k, lw=1)
+    ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_ylabel("loss")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    write_atomic(out / CURVE_PNG, buf.getvalue())
