@@ -38,3 +38,12 @@ def run_expert_steps(env, expert, seed, steps):
         if terminated or truncated:
             break
     return observations, actions
+
+
+@pytest.fixture(scope="session")
+def mn_dataset(tmp_path_factory):
+    """Two press_button demonstrations (an M(n) task: several subtasks, key frames)."""
+    out = tmp_path_factory.mktemp("data") / "mn"
+    collect(CollectConfig("press_button", out, episodes=2, seed=0, cameras=("head", "left_wrist"),
+                          width=64, height=48, progress=False))
+    return out

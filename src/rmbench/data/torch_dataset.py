@@ -4,6 +4,7 @@ decode video again."""
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -124,7 +125,12 @@ class EpisodeOrderSampler(Sampler[list[int]]):
     frame, so a per-slot memory carried across batches is what the policy would hold at run
     time. When a slot's episode ends the slot starts the next episode of a shuffled queue (its
     first item has ``episode_start`` set: clear the slot's memory there). Batches mix episodes at
-    different time steps. Deterministic for a given ``seed`` and epoch (``set_epoch``).
+    different time steps.
+
+    The batches form one endless stream (``stream(start)``), deterministic for a ``seed``: slots
+    run on across epoch boundaries, so every frame of every episode is visited whatever the
+    batch size. An epoch (``__iter__`` after ``set_epoch``) is the stream's ``len(self)``
+    batches from ``epoch * len(self)``, about one pass over the frames.
 
     With ``stride`` s a slot visits every s-th frame of its episode from a random phase in
     [0, s), for memories written every s control steps; give the DemoDataset the same
@@ -142,10 +148,14 @@ class EpisodeOrderSampler(Sampler[list[int]]):
         self.epoch = epoch
 
     def __len__(self) -> int:
-        return int(self.lengths.sum()) // (self.batch_size * self.stride)
+        return max(1, int(self.lengths.sum()) // (self.batch_size * self.stride))
 
     def __iter__(self) -> Iterator[list[int]]:
-        rng = np.random.default_rng([self.seed, self.epoch])
+        yield from itertools.islice(self.stream(self.epoch * len(self)), len(self))
+
+    def stream(self, start: int = 0) -> Iterator[list[int]]:
+        """Batch ``start`` of the stream and all after it (skipping costs index arithmetic only)."""
+        rng = np.random.default_rng(self.seed)
         n = len(self.lengths)
 
         def queue():
@@ -154,18 +164,21 @@ class EpisodeOrderSampler(Sampler[list[int]]):
 
         episodes = queue()
 
-        def start() -> list[int]:
+        def begin() -> list[int]:
             e = int(next(episodes))
             phase = int(rng.integers(self.stride)) if self.stride > 1 else 0
             return [e, min(phase, int(self.lengths[e]) - 1)]
 
-        slots = [start() for _ in range(self.batch_size)]
-        for _ in range(len(self)):
+        slots = [begin() for _ in range(self.batch_size)]
+        step = 0
+        while True:
             batch = []
             for slot in slots:
                 e, t = slot
                 batch.append(int(self.starts[e] + t))
                 slot[1] += self.stride
                 if slot[1] >= self.lengths[e]:
-                    slot[:] = start()
-            yield batch
+                    slot[:] = begin()
+            if step >= start:
+                yield batch
+            step += 1

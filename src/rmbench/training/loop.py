@@ -114,7 +114,9 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     opt = torch.optim.AdamW([{"params": g["params"], "lr": g["lr"], "name": g["name"],
                               "base_lr": g["lr"], "min_lr": g["min_lr"]} for g in groups],
                             betas=(0.9, 0.999), weight_decay=cfg.weight_decay)
-    identity = {"describe": describe, "train": asdict(cfg), "world": dist.world}
+    # as JSON stores it (tuples become lists), so that a resume compares like with like
+    identity = json.loads(json.dumps({"describe": describe, "train": asdict(cfg),
+                                      "world": dist.world}))
     start = _resume(out, model, opt, identity, device)
     if start >= cfg.steps:
         log.info("%s: already trained for %d steps", out, start)
@@ -142,7 +144,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
         if hasattr(model, "after_step"):
             model.after_step()
         if lead and (step + 1) % cfg.log_every == 0:
-            row = {"step": step + 1, "loss": float(loss), "grad_norm": float(grad_norm),
+            row = {"step": step + 1, "loss": loss.item(), "grad_norm": float(grad_norm),
                    **{f"lr/{g['name']}": g["lr"] for g in opt.param_groups},
                    **{k: float(v) for k, v in logs.items()}}
             rows.append(row)

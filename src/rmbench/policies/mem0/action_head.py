@@ -37,8 +37,9 @@ class FlowMatchingHead(nn.Module):
 
     def velocity(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """x (B, H, A) at times t (B,), context tokens cond (B, N, d) -> (B, H, A)."""
-        tokens = torch.cat([cond, self.time(time_embedding(t, self.dim))[:, None],
-                            self.inp(x) + self.pos], 1)
+        # the noise level goes into every action token: each needs it to scale its velocity
+        time = self.time(time_embedding(t, self.dim))[:, None]
+        tokens = torch.cat([cond, self.inp(x) + self.pos + time], 1)
         return self.out(self.norm(self.blocks(tokens)[:, -self.horizon:]))
 
     def loss(self, cond: torch.Tensor, actions: torch.Tensor, is_pad: torch.Tensor,

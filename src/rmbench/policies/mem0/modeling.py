@@ -127,7 +127,7 @@ class Mem0Trainer(nn.Module):
         target = ex.normalizer.action(batch[L.ACTION])
         action_loss = ex.head.loss(ex.condition(c, batch[L.STATE]), target,
                                    batch["action_is_pad"], self.generator)
-        logs = {"loss/action": float(action_loss)}
+        logs = {"loss/action": action_loss.item()}
         loss = action_loss
         if self.decompose:
             label = batch["end_label"].float()
@@ -135,7 +135,7 @@ class Mem0Trainer(nn.Module):
             end_loss = F.binary_cross_entropy_with_logits(
                 ex.end_logit(c), label, pos_weight=((len(label) - pos) / pos).clamp(max=50))
             loss = loss + cfg.classifier_weight * end_loss
-            logs["loss/end"] = float(end_loss)
+            logs["loss/end"] = end_loss.item()
         return loss, logs
 
     def extra_state(self) -> dict:

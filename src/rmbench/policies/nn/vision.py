@@ -69,7 +69,11 @@ class ImageEncoder(nn.Module):
         self.register_buffer("std", torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1))
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
-        x = images.float() / 255.0 if images.dtype == torch.uint8 else images
+        # contiguous (NCHW) input: a permuted HWC frame reaches oneDNN's convolution as
+        # channels-last, whose weight-gradient kernel corrupts the heap on multi-threaded CPU
+        # (torch 2.13, seen as a double free in mkldnn_convolution_backward_weights)
+        x = images.contiguous()
+        x = x.float() / 255.0 if x.dtype == torch.uint8 else x
         x = self.stages(self.stem((x - self.mean) / self.std))
         return self.out(torch.cat([x.mean((2, 3)), self.keypoints(x)], -1))
 
