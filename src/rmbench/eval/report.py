@@ -53,15 +53,18 @@ def load_runs(folders: list[str | Path]) -> list[dict]:
     return runs
 
 
-def table(runs: list[dict], published: list[str]) -> tuple[list[str], list[list]]:
-    """Header and rows: task, TMC, one success rate (%) per column; None where not evaluated."""
+def table(runs: list[dict], published: list[str], metric: str = "success_rate"
+          ) -> tuple[list[str], list[list]]:
+    """Header and rows: task, TMC, one value (%) of ``metric`` (success_rate or mean_progress)
+    per column; None where not evaluated. Published numbers exist for success rates only."""
+    published = published if metric == "success_rate" else []
     header = ["task", "TMC"] + [r["name"] for r in runs] + [f"{p} (published)" for p in published]
     rows: list[list] = []
     for group in ("M(1)", "M(n)"):
         tasks = [c.name for c in ordered() if c.tmc == group]
         group_rows = []
         for t in tasks:
-            vals = [100 * r["summary"]["tasks"][t]["success_rate"] if t in r["summary"]["tasks"]
+            vals = [100 * r["summary"]["tasks"][t][metric] if t in r["summary"]["tasks"]
                     else None for r in runs] + [PUBLISHED[p][t] for p in published]
             group_rows.append([t, group, *vals])
         rows.extend(group_rows)
@@ -84,14 +87,17 @@ def _fmt(v) -> str:
 
 
 def markdown(runs: list[dict], published: list[str]) -> str:
-    header, rows = table(runs, published)
-    lines = ["# Success rate (%)", "", "| " + " | ".join(header) + " |",
-             "|" + "---|" * len(header)]
-    for r in rows:
-        bold = str(r[0]).startswith("average")
-        cells = [f"**{r[0]}**" if bold else r[0], r[1]] + [_fmt(v) for v in r[2:]]
-        lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Runs: " + ", ".join(f"`{r['name']}` ({r['folder']})" for r in runs), ""]
+    lines = []
+    for metric, title in (("success_rate", "Success rate (%)"),
+                          ("mean_progress", "Progress (mean of each episode's best, %)")):
+        header, rows = table(runs, published, metric)
+        lines += [f"# {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        for r in rows:
+            bold = str(r[0]).startswith("average")
+            cells = [f"**{r[0]}**" if bold else r[0], r[1]] + [_fmt(v) for v in r[2:]]
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
+    lines += ["Runs: " + ", ".join(f"`{r['name']}` ({r['folder']})" for r in runs), ""]
     return "\n".join(lines)
 
 
