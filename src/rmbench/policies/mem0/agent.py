@@ -57,12 +57,23 @@ def load_mem0(path: str | Path, ablations: tuple[str, ...] = ()):
 class Mem0Policy(BasePolicy):
     def __init__(self, arg: str, env=None):
         path, ablations = parse_argument(arg)
-        self.model, self.cfg, self.describe = load_mem0(path, ablations)
+        model, cfg, describe = load_mem0(path, ablations)
+        if env is not None and type(env.unwrapped.task).name != describe["task"]:
+            raise CheckpointError(f"{path} was trained on {describe['task']}, not "
+                                  f"{type(env.unwrapped.task).name}")
+        self._setup(model, cfg, describe, env)
+
+    @classmethod
+    def from_model(cls, model, describe: dict[str, Any], env=None) -> Mem0Policy:
+        """A policy around an in-memory model (benchmarks, notebooks)."""
+        policy = cls.__new__(cls)
+        policy._setup(model.eval(), model.cfg, describe, env)
+        return policy
+
+    def _setup(self, model, cfg: Mem0Config, describe: dict[str, Any], env) -> None:
+        self.model, self.cfg, self.describe = model, cfg, describe
         self.cameras = self.cfg.cameras
         self.env = env.unwrapped if env is not None else None
-        if self.env is not None and type(self.env.task).name != self.describe["task"]:
-            raise CheckpointError(f"{path} was trained on {self.describe['task']}, not "
-                                  f"{type(self.env.task).name}")
         if self.cfg.gt_classifier and self.env is None:
             raise ValueError("gt_classifier reads the simulator's subtask boundary: it cannot be "
                              "served remotely")
