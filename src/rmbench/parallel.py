@@ -7,6 +7,7 @@ number of workers or on the backend.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
@@ -40,12 +41,21 @@ class Inline:
             self.on_close()
 
 
+def _share_cores(threads: int) -> None:
+    """Worker start-up: each of N workers gets cores/N threads for OpenMP/BLAS (torch reads
+    this when a learned policy first imports it), instead of every worker taking all cores."""
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ.setdefault(var, str(threads))
+
+
 class Pool:
     """Local worker processes. Spawned, not forked: a fork would share MuJoCo/GL state."""
 
     def __init__(self, workers: int):
         self.window = 2 * workers
-        self.pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"))
+        self.pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"),
+                                        initializer=_share_cores,
+                                        initargs=(max(1, (os.cpu_count() or 1) // workers),))
 
     def submit(self, fn, *args):
         return self.pool.submit(fn, *args)
