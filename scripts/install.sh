@@ -4,7 +4,7 @@
 #     when any is missing;
 #  2. create .venv at the repository root;
 #  3. install the CPU build of torch first (never a CUDA build), then rmbench with its test,
-#     training and text-encoder extras.
+#     training, text-encoder and planner-backend extras.
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -48,7 +48,7 @@ if ! .venv/bin/python -c "import torch, sys; sys.exit(torch.__version__.split('+
   fi
   rm -rf "$tmp"
 fi
-echo "[install] rmbench[test,train,text]"
-"${PIP[@]}" install -q -e ".[test,train,text]"
+echo "[install] rmbench[test,train,text,vlm]"
+"${PIP[@]}" install -q -e ".[test,train,text,vlm]"
 .venv/bin/python -c "import rmbench, torch; assert not torch.version.cuda, 'a CUDA torch was installed'"
 echo "[install] done: .venv/bin/rmbench --help"

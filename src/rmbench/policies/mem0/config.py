@@ -51,6 +51,13 @@ class Mem0Config:
     classifier_weight: float = 1.0
     """Weight of the end classifier's loss beside the action loss."""
     # --- planner
+    planner_backend: str = "small"
+    """"small": the CPU planner (planner.py); "vlm": a language model with LoRA over the key
+    memory (planner_vlm.py, the rmbench[vlm] extra)."""
+    vlm_model: str = ""
+    """For the vlm backend: a local Hugging Face causal-LM folder; empty = a tiny random Llama
+    (tests only)."""
+    vlm_lora_rank: int = 8
     planner_cameras: tuple[str, ...] = ("head",)
     """Cameras the planner sees for o_0 and the key memory's end frames."""
     planner_layers: int = 2
@@ -77,6 +84,8 @@ class Mem0Config:
         unknown = set(self.ablations) - set(ABLATIONS)
         if unknown:
             raise ValueError(f"unknown ablation {sorted(unknown)}; ablations: {', '.join(ABLATIONS)}")
+        if self.planner_backend not in ("small", "vlm"):
+            raise ValueError(f"planner_backend must be 'small' or 'vlm', got {self.planner_backend!r}")
         if not self.cameras:
             raise ValueError("Mem-0 needs at least one camera")
         if not set(self.planner_cameras) <= set(self.cameras):

@@ -73,7 +73,12 @@ class Mem0Model(nn.Module):
         self.cfg = cfg
         vec = text_vectors or {}
         self.executor = Executor(cfg, executor_texts, vec.get("executor"))
-        self.planner = Planner(cfg, planner_texts, vec.get("planner"))
+        if cfg.planner_backend == "vlm":
+            from rmbench.policies.mem0.planner_vlm import VLMPlanner
+
+            self.planner = VLMPlanner(cfg, planner_texts)
+        else:
+            self.planner = Planner(cfg, planner_texts, vec.get("planner"))
 
 
 class Mem0Trainer(nn.Module):

@@ -115,7 +115,8 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
     gen = torch.Generator().manual_seed(train_cfg.seed)
     device = torch.device("cuda" if train_cfg.device.startswith("cuda") else "cpu")
     planner.to(device)
-    opt = torch.optim.AdamW(planner.parameters(), lr=cfg.planner_lr, betas=(0.9, 0.999),
+    trainable = [p for p in planner.parameters() if p.requires_grad]  # (LoRA: adapters only)
+    opt = torch.optim.AdamW(trainable, lr=cfg.planner_lr, betas=(0.9, 0.999),
                             weight_decay=train_cfg.weight_decay)
     rng = np.random.default_rng(train_cfg.seed)
     acc_ema, loss_ema = 0.0, 0.0
