@@ -15,13 +15,14 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from rmbench.data import layout as L
 from rmbench.policies.mem0.action_head import FlowMatchingHead
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.memory import MemoryFusion, MemoryStore
 from rmbench.policies.mem0.planner import Planner
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
-from rmbench.policies.nn.vision import ImageEncoder
+from rmbench.policies.nn.vision import ImageEncoder, color_jitter
 
 ACTION_DIM = 14
 
@@ -113,9 +114,6 @@ class Mem0Trainer(nn.Module):
                  "lr": cfg.lr_head, "min_lr": cfg.min_lr_head}]
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
-        from rmbench.data import layout as L
-        from rmbench.policies.nn.vision import color_jitter
-
         ex, cfg = self.model.executor, self.model.cfg
         images = [batch[L.image_key(cam)] for cam in cfg.cameras]
         if any(cfg.jitter):

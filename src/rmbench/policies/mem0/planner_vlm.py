@@ -54,7 +54,6 @@ class VLMPlanner(nn.Module):
         from peft import LoraConfig, get_peft_model
 
         self.use_key = cfg.use_key
-        self.texts = list(texts)
         lm, tokenize = _language_model(cfg.vlm_model)
         for p in lm.parameters():
             p.requires_grad_(False)
@@ -73,10 +72,6 @@ class VLMPlanner(nn.Module):
         self.register_buffer("text_ids", torch.tensor([i + [0] * (n - len(i)) for i in ids]),
                              persistent=False)
         self.register_buffer("text_len", torch.tensor([len(i) for i in ids]), persistent=False)
-
-    @property
-    def text(self):  # the candidate list, as the small planner exposes it
-        return self
 
     def embed(self, images: list[torch.Tensor]) -> torch.Tensor:
         return torch.stack([enc(img) for enc, img in zip(self.encoders, images, strict=True)],

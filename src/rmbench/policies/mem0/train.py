@@ -20,7 +20,7 @@ from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
 from rmbench.policies.mem0.planner import DONE, planner_examples, planner_loss
 from rmbench.policies.nn.normalize import Normalizer
-from rmbench.policies.nn.text import sentence_embeddings
+from rmbench.policies.nn.text import MINILM_DIM, sentence_embeddings
 from rmbench.policies.nn.vision import color_jitter
 from rmbench.tasks import get_task
 from rmbench.training.batches import batch_stream
@@ -56,7 +56,7 @@ class Mem0Frames(DemoDataset):
 
 def build_model(cfg: Mem0Config, describe: dict[str, Any], text_vectors=None) -> Mem0Model:
     if text_vectors is None and describe["text_encoder"] == "minilm":  # filled by the weights
-        text_vectors = {k: torch.zeros(len(describe[f"{k}_texts"]), 384)
+        text_vectors = {k: torch.zeros(len(describe[f"{k}_texts"]), MINILM_DIM)
                         for k in ("executor", "planner")}
     return Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], text_vectors)
 
@@ -87,7 +87,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     out = Path(out)
     planner_report = None
     if decompose and not (out / STATE).exists():
-        planner_report = fit_planner(model, ds, cfg, train_cfg, progress)
+        planner_report = fit_planner(model, ds, cfg, train_cfg, planner_texts.index(DONE), progress)
     trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed)
     frames = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
 
@@ -104,11 +104,10 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
 
 
 def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: TrainConfig,
-                progress: bool) -> dict[str, Any]:
+                done: int, progress: bool) -> dict[str, Any]:
     """Train the planner on every decision of every demonstration (a few hundred): first
-    subtask, each next one, then done."""
+    subtask, each next one, then done (candidate index ``done``)."""
     planner = model.planner
-    done = len(planner.text.texts) - 1
     examples = [x for e in range(ds.num_episodes)
                 for x in planner_examples(e, ds.episode(e, cameras=[]).subtask_index, done)]
     cache = FrameCache(ds, cfg.image_size)
