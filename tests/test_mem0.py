@@ -142,7 +142,8 @@ def sampled_action_error(model, dataset) -> float:
                 memory.push(z)
                 chunk = ex.head.sample(ex.condition(c, item[L.STATE][None]), cfg.flow_steps,
                                        torch.Generator().manual_seed(t))
-                err = ex.normalizer.unaction(chunk)[0, :cfg.execute] - item[L.ACTION][:cfg.execute]
+                err = (ex.normalizer.unaction(chunk, item[L.STATE][None])[0, :cfg.execute]
+                       - item[L.ACTION][:cfg.execute])
                 errors.append(err.abs().mean().item())
     return float(np.mean(errors))
 

@@ -115,8 +115,8 @@ class Mem0Policy(BasePolicy):
             self.memory.push(z)
         if not self.queue:
             state = torch.as_tensor(np.asarray(observation["agent_pos"]), dtype=torch.float32)[None]
-            chunk = ex.normalizer.unaction(ex.head.sample(ex.condition(c, state), cfg.flow_steps,
-                                                          self.generator))
+            normalised = ex.head.sample(ex.condition(c, state), cfg.flow_steps, self.generator)
+            chunk = ex.normalizer.unaction(normalised, state)
             self.queue = list(chunk[0, :cfg.execute].double().numpy())
         action = self.queue.pop(0)
         if self.decompose and self.ended(c):

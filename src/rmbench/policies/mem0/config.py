@@ -41,6 +41,9 @@ class Mem0Config:
     """D: actions executed from each chunk before predicting again (1 <= D <= H)."""
     head_layers: int = 4
     """Transformer layers of the flow-matching action head."""
+    relative_actions: bool = True
+    """Joint targets as offsets from the current joint positions, grippers absolute (as openpi
+    does for ALOHA): holding still is the zero prediction. False: absolute targets."""
     flow_steps: int = 10
     """Euler integration steps when sampling a chunk."""
     # --- end classifier

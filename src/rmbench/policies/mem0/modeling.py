@@ -127,7 +127,7 @@ class Mem0Trainer(nn.Module):
         self.last_subtask = subtask.clone()
         c = ex.context(z, self.memory, batch["text_index"])
         self.memory.push(z)
-        target = ex.normalizer.action(batch[L.ACTION])
+        target = ex.normalizer.action(batch[L.ACTION], batch[L.STATE])
         action_loss = ex.head.loss(ex.condition(c, batch[L.STATE]), target,
                                    batch["action_is_pad"], self.generator)
         logs = {"loss/action": action_loss.item()}

@@ -83,7 +83,13 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     torch.manual_seed(train_cfg.seed)
     model = build_model(cfg, describe, vectors)
     stats = from_json(json.loads((ds.root / L.STATS).read_text()))
-    model.executor.normalizer.load_state_dict(Normalizer.from_stats(stats).state_dict())
+    if cfg.relative_actions:
+        low_dim = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
+        norm = Normalizer.from_episodes(stats, [ep.state for ep in low_dim],
+                                        [ep.action for ep in low_dim], cfg.horizon)
+    else:
+        norm = Normalizer.from_stats(stats)
+    model.executor.normalizer.load_state_dict(norm.state_dict())
     out = Path(out)
     planner_report = None
     if decompose and not (out / STATE).exists():

@@ -1,6 +1,11 @@
-"""Normalisation from a dataset's meta/stats.json, stored in the policy (so a checkpoint
-carries it): state to zero mean and unit variance, actions to [-1, 1] by their min and max
-(the range a diffusion head samples in)."""
+"""Normalisation stored in the policy (so a checkpoint carries it): state to zero mean and
+unit variance, actions to [-1, 1] by their min and max (the range a diffusion head samples in).
+
+Actions can be relative: the dims in ``relative`` (the joints) are predicted as offsets from
+the current joint positions and the others (the grippers) as absolute targets, as openpi does
+for ALOHA. Holding still is then the zero prediction, which a small model trained on a few
+demonstrations otherwise has to learn from the state token.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +15,9 @@ from torch import nn
 
 from rmbench.data import layout as L
 
+# 6 joints, gripper, 6 joints, gripper
+JOINTS = np.array([True] * 6 + [False] + [True] * 6 + [False])
+
 
 class Normalizer(nn.Module):
     def __init__(self, dim: int = 14):
@@ -18,28 +26,60 @@ class Normalizer(nn.Module):
         self.register_buffer("state_std", torch.ones(dim))
         self.register_buffer("action_min", -torch.ones(dim))
         self.register_buffer("action_max", torch.ones(dim))
+        self.register_buffer("relative", torch.zeros(dim))  # 1 where actions are offsets
 
     @classmethod
     def from_stats(cls, stats: dict[str, dict[str, np.ndarray]]) -> Normalizer:
+        """Absolute actions, ranges from meta/stats.json."""
         norm = cls(len(np.asarray(stats[L.ACTION]["min"])))
-        with torch.no_grad():
-            norm.state_mean.copy_(torch.as_tensor(np.asarray(stats[L.STATE]["mean"]), dtype=torch.float32))
-            # joints that never move (std 0) would divide by zero
-            norm.state_std.copy_(torch.as_tensor(np.maximum(stats[L.STATE]["std"], 1e-3),
-                                                 dtype=torch.float32))
-            lo = np.asarray(stats[L.ACTION]["min"], np.float64)
-            hi = np.asarray(stats[L.ACTION]["max"], np.float64)
-            # an action dim that never changes still gets a range to divide by
-            mid, half = (hi + lo) / 2, np.maximum(hi - lo, 1e-3) / 2
-            norm.action_min.copy_(torch.as_tensor(mid - half, dtype=torch.float32))
-            norm.action_max.copy_(torch.as_tensor(mid + half, dtype=torch.float32))
+        norm._set_state(stats)
+        norm._set_range(np.asarray(stats[L.ACTION]["min"]), np.asarray(stats[L.ACTION]["max"]))
         return norm
+
+    @classmethod
+    def from_episodes(cls, stats: dict[str, dict[str, np.ndarray]], states: list[np.ndarray],
+                      actions: list[np.ndarray], horizon: int,
+                      relative: np.ndarray = JOINTS) -> Normalizer:
+        """Relative actions: the range of ``action[t + k] - state[t]`` over every frame t and
+        chunk offset k < horizon (the last action repeats past an episode's end, as in the
+        training chunks)."""
+        norm = cls(len(relative))
+        norm._set_state(stats)
+        lo, hi = np.full(len(relative), np.inf), np.full(len(relative), -np.inf)
+        for s, a in zip(states, actions, strict=True):
+            n = len(a)
+            for k in range(horizon):
+                target = a[np.minimum(np.arange(n) + k, n - 1)]
+                x = np.where(relative, target - s, target)
+                lo, hi = np.minimum(lo, x.min(0)), np.maximum(hi, x.max(0))
+        norm._set_range(lo, hi)
+        with torch.no_grad():
+            norm.relative.copy_(torch.as_tensor(relative, dtype=torch.float32))
+        return norm
+
+    def _set_state(self, stats) -> None:
+        with torch.no_grad():
+            self.state_mean.copy_(torch.as_tensor(np.asarray(stats[L.STATE]["mean"]), dtype=torch.float32))
+            # joints that never move (std 0) would divide by zero
+            self.state_std.copy_(torch.as_tensor(np.maximum(stats[L.STATE]["std"], 1e-3),
+                                                 dtype=torch.float32))
+
+    def _set_range(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        # an action dim that never changes still gets a range to divide by
+        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        mid, half = (hi + lo) / 2, np.maximum(hi - lo, 1e-3) / 2
+        with torch.no_grad():
+            self.action_min.copy_(torch.as_tensor(mid - half, dtype=torch.float32))
+            self.action_max.copy_(torch.as_tensor(mid + half, dtype=torch.float32))
 
     def state(self, x: torch.Tensor) -> torch.Tensor:
         return (x - self.state_mean) / self.state_std
 
-    def action(self, x: torch.Tensor) -> torch.Tensor:
+    def action(self, x: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        """Actions (B, H, A) taken from ``state`` (B, A) -> normalised (B, H, A)."""
+        x = x - self.relative * state[:, None]
         return 2 * (x - self.action_min) / (self.action_max - self.action_min) - 1
 
-    def unaction(self, x: torch.Tensor) -> torch.Tensor:
-        return (x.clamp(-1, 1) + 1) / 2 * (self.action_max - self.action_min) + self.action_min
+    def unaction(self, x: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        y = (x.clamp(-1, 1) + 1) / 2 * (self.action_max - self.action_min) + self.action_min
+        return y + self.relative * state[:, None]
