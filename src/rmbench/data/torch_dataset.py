@@ -73,6 +73,8 @@ class DemoDataset(torch.utils.data.Dataset):
                  cameras: list[str] | None = None, image_size: tuple[int, int] | None = None,
                  episodes: list[int] | None = None, cache_dir: str | Path | None = None,
                  stride: int = 1):
+        if stride < 1:
+            raise ValueError(f"stride must be at least 1, got {stride}")
         self.stride = stride
         self.ds = root if isinstance(root, Dataset) else Dataset(root)
         if chunk < 1:
@@ -132,17 +134,16 @@ class EpisodeOrderSampler(Sampler[list[int]]):
     batch size. An epoch (``__iter__`` after ``set_epoch``) is the stream's ``len(self)``
     batches from ``epoch * len(self)``, about one pass over the frames.
 
-    With ``stride`` s a slot visits every s-th frame of its episode from a random phase in
-    [0, s), for memories written every s control steps; give the DemoDataset the same
-    ``stride`` so that the phase's frame is the one marked ``episode_start``."""
+    With a dataset of ``stride`` s a slot visits every s-th frame of its episode from a random
+    phase in [0, s) (the phase's frame is the one the dataset marks ``episode_start``), for
+    memories written every s control steps."""
 
-    def __init__(self, dataset: DemoDataset, batch_size: int, shuffle: bool = True, seed: int = 0,
-                 stride: int = 1):
-        if batch_size < 1 or stride < 1:
-            raise ValueError(f"batch_size and stride must be at least 1, got {batch_size}, {stride}")
+    def __init__(self, dataset: DemoDataset, batch_size: int, shuffle: bool = True, seed: int = 0):
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
         self.starts, self.lengths = dataset.starts[:-1], dataset.lengths
         self.batch_size, self.shuffle, self.seed, self.epoch = batch_size, shuffle, seed, 0
-        self.stride = stride
+        self.stride = dataset.stride
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = epoch

@@ -96,7 +96,6 @@ class Mem0Policy(BasePolicy):
         self.subtask = self.goal
         self.start_subtask = True
         self.stage = 0
-        self.log: list[tuple[int, str]] = []  # (step, subtask started) for inspection
 
     @torch.no_grad()
     def act(self, observation: dict[str, Any]) -> np.ndarray:
@@ -109,7 +108,6 @@ class Mem0Policy(BasePolicy):
         if self.start_subtask:
             self.memory.reset(torch.ones(1, dtype=torch.bool), tokens)
             self.queue, self.start_subtask = [], False
-            self.log.append((self.t, self.describe["executor_texts"][self.subtask]))
         c = ex.context(z, self.memory, torch.tensor([self.subtask]))
         if self.t % cfg.memory_every == 0:
             self.memory.push(z)

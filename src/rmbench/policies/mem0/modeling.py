@@ -22,7 +22,7 @@ from rmbench.policies.mem0.memory import MemoryFusion, MemoryStore
 from rmbench.policies.mem0.planner import Planner
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
-from rmbench.policies.nn.vision import ImageEncoder, color_jitter
+from rmbench.policies.nn.vision import CameraEncoders, color_jitter
 
 ACTION_DIM = 14
 
@@ -32,8 +32,7 @@ class Executor(nn.Module):
         super().__init__()
         self.cfg = cfg
         d = cfg.dim
-        self.encoders = nn.ModuleList(ImageEncoder(d, cfg.encoder_channels, cfg.keypoints)
-                                      for _ in cfg.cameras)
+        self.encoders = CameraEncoders(len(cfg.cameras), d, cfg.encoder_channels, cfg.keypoints)
         self.camera_embed = nn.Parameter(torch.randn(len(cfg.cameras), d) * 0.02)
         self.text = TextTable(texts, d, text_vectors)
         self.anchor_fusion = MemoryFusion(d, cfg.heads, len(cfg.cameras))
@@ -45,8 +44,7 @@ class Executor(nn.Module):
 
     def encode(self, images: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """Per-camera uint8 (B, 3, H, W) -> tokens (B, C, d) and z_img (B, d)."""
-        tokens = torch.stack([enc(img) for enc, img in zip(self.encoders, images, strict=True)], 1)
-        tokens = tokens + self.camera_embed
+        tokens = self.encoders(images) + self.camera_embed
         return tokens, tokens.mean(1)
 
     def context(self, z: torch.Tensor, memory: MemoryStore, text: torch.Tensor) -> torch.Tensor:

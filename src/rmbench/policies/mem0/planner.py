@@ -19,7 +19,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from rmbench.policies.nn.text import TextTable
-from rmbench.policies.nn.vision import ImageEncoder
+from rmbench.policies.nn.vision import CameraEncoders
 
 DONE = "done"
 MAX_KEYS = 32  # positions beyond this share the last embedding
@@ -30,8 +30,8 @@ class Planner(nn.Module):
         super().__init__()
         d = cfg.dim
         self.use_key = cfg.use_key
-        self.encoders = nn.ModuleList(ImageEncoder(d, cfg.encoder_channels, cfg.keypoints)
-                                      for _ in cfg.planner_cameras)
+        self.encoders = CameraEncoders(len(cfg.planner_cameras), d, cfg.encoder_channels,
+                                       cfg.keypoints)
         self.text = TextTable(texts, d, text_vectors)  # candidates: subtasks, then "done"
         self.goal = nn.Parameter(torch.randn(d) * 0.02)
         self.kind = nn.Parameter(torch.randn(2, d) * 0.02)  # o_0 / key entry
@@ -44,8 +44,7 @@ class Planner(nn.Module):
 
     def embed(self, images: list[torch.Tensor]) -> torch.Tensor:
         """Per-camera uint8 (N, 3, H, W) -> (N, d)."""
-        return torch.stack([enc(img) for enc, img in zip(self.encoders, images, strict=True)],
-                           1).mean(1)
+        return self.encoders(images).mean(1)
 
     def forward(self, first: torch.Tensor, keys: torch.Tensor, key_text: torch.Tensor,
                 key_valid: torch.Tensor) -> torch.Tensor:

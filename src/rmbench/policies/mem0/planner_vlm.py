@@ -17,7 +17,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from rmbench.policies.nn.vision import ImageEncoder
+from rmbench.policies.nn.vision import CameraEncoders
 
 MAX_TEXT_TOKENS = 32
 
@@ -60,8 +60,8 @@ class VLMPlanner(nn.Module):
         self.lm = get_peft_model(lm, LoraConfig(r=cfg.vlm_lora_rank, lora_alpha=2 * cfg.vlm_lora_rank,
                                                 target_modules=["q_proj", "v_proj"], lora_dropout=0.0))
         hidden = lm.config.hidden_size
-        self.encoders = nn.ModuleList(ImageEncoder(cfg.dim, cfg.encoder_channels, cfg.keypoints)
-                                      for _ in cfg.planner_cameras)
+        self.encoders = CameraEncoders(len(cfg.planner_cameras), cfg.dim, cfg.encoder_channels,
+                                       cfg.keypoints)
         self.project = nn.Linear(cfg.dim, hidden)
         self.query = nn.Parameter(torch.randn(hidden) * 0.02)
         self.head = nn.Linear(hidden, len(texts))
@@ -74,8 +74,7 @@ class VLMPlanner(nn.Module):
         self.register_buffer("text_len", torch.tensor([len(i) for i in ids]), persistent=False)
 
     def embed(self, images: list[torch.Tensor]) -> torch.Tensor:
-        return torch.stack([enc(img) for enc, img in zip(self.encoders, images, strict=True)],
-                           1).mean(1)
+        return self.encoders(images).mean(1)
 
     def forward(self, first: torch.Tensor, keys: torch.Tensor, key_text: torch.Tensor,
                 key_valid: torch.Tensor) -> torch.Tensor:

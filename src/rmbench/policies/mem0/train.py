@@ -98,8 +98,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     frames = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
 
     def batches(start: int, rank: int, world: int):
-        sampler = EpisodeOrderSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank,
-                                      stride=cfg.memory_every)
+        sampler = EpisodeOrderSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
         return batch_stream(frames, sampler, start, workers)
 
     result = train(trainer, batches, train_cfg, out, describe, progress)

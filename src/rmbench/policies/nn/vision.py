@@ -78,6 +78,18 @@ class ImageEncoder(nn.Module):
         return self.out(torch.cat([x.mean((2, 3)), self.keypoints(x)], -1))
 
 
+class CameraEncoders(nn.ModuleList):
+    """One ImageEncoder per camera (the cameras see different things): a list of uint8
+    (B, 3, H, W) images, in camera order, -> tokens (B, cameras, dim). A ModuleList, so its
+    weights are named ``<name>.<camera index>.*``."""
+
+    def __init__(self, cameras: int, dim: int, channels: tuple[int, ...], keypoints: int):
+        super().__init__(ImageEncoder(dim, channels, keypoints) for _ in range(cameras))
+
+    def forward(self, images: list[torch.Tensor]) -> torch.Tensor:
+        return torch.stack([enc(img) for enc, img in zip(self, images, strict=True)], 1)
+
+
 def color_jitter(images: torch.Tensor, generator: torch.Generator | None, brightness: float = 0.1,
                  contrast: float = 0.1, saturation: float = 0.1) -> torch.Tensor:
     """Per-image random brightness, contrast and saturation factors in [1 - a, 1 + a] (the
