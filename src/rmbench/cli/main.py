@@ -220,7 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("train", help="train a learned policy on a dataset (resumes in --out)")
-    p.add_argument("policy", choices=["mem0"], help="which policy")
+    p.add_argument("policy", choices=["mem0", "dp", "act"], help="which policy")
     p.add_argument("--dataset", required=True, help="an rmbench dataset folder")
     p.add_argument("--out", required=True, help="checkpoint folder (resumed if it exists)")
     p.add_argument("--steps", type=int, default=3000)
@@ -229,7 +229,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--save-every", type=int, default=500)
     p.add_argument("--ablation", action="append",
-                   help="no_anchor | no_sliding | no_memory | no_key (repeatable)")
+                   help="Mem-0 only: no_anchor | no_sliding | no_memory | no_key (repeatable)")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE",
                    help="override a config field, VALUE as JSON (e.g. --set dim=64)")
     p.add_argument("--workers", type=int, default=0, help="data-loading processes")

@@ -67,15 +67,19 @@ class DemoDataset(torch.utils.data.Dataset):
     uint8, ``action`` (chunk, 14) float32 with ``action_is_pad`` (chunk,) where the chunk runs
     past the episode's end (padded with its last action), and ``subtask_index``,
     ``subtask_end``, ``task_index``, ``episode_index``, ``frame_index``, ``episode_start``.
+
+    With ``history`` n > 1 the state and images are the last n frames, oldest first: state
+    (n, 14) and images (n, 3, H, W), the episode's first frame repeated before its start (an
+    observation window, as Diffusion Policy reads).
     """
 
     def __init__(self, root: str | Path | Dataset, *, chunk: int = 30,
                  cameras: list[str] | None = None, image_size: tuple[int, int] | None = None,
                  episodes: list[int] | None = None, cache_dir: str | Path | None = None,
-                 stride: int = 1):
-        if stride < 1:
-            raise ValueError(f"stride must be at least 1, got {stride}")
-        self.stride = stride
+                 stride: int = 1, history: int = 1):
+        if stride < 1 or history < 1:
+            raise ValueError(f"stride and history must be at least 1, got {stride} and {history}")
+        self.stride, self.history = stride, history
         self.ds = root if isinstance(root, Dataset) else Dataset(root)
         if chunk < 1:
             raise ValueError(f"chunk must be at least 1, got {chunk}")
@@ -104,8 +108,9 @@ class DemoDataset(torch.utils.data.Dataset):
         ep = self.low_dim[k]
         n = len(ep)
         idx = np.minimum(np.arange(t, t + self.chunk), n - 1)
+        seen = np.maximum(np.arange(t - self.history + 1, t + 1), 0) if self.history > 1 else t
         item = {
-            L.STATE: torch.from_numpy(ep.state[t].copy()),
+            L.STATE: torch.from_numpy(ep.state[seen].copy()),
             L.ACTION: torch.from_numpy(ep.action[idx].copy()),
             "action_is_pad": torch.from_numpy(np.arange(t, t + self.chunk) >= n),
             L.SUBTASK_INDEX: torch.tensor(int(ep.subtask_index[t])),
@@ -117,8 +122,8 @@ class DemoDataset(torch.utils.data.Dataset):
             "episode_start": torch.tensor(t < self.stride),
         }
         for cam in self.cameras:
-            frame = self.cache.frames(self.episode_ids[k], cam)[t]
-            item[L.image_key(cam)] = torch.from_numpy(np.array(frame)).permute(2, 0, 1)
+            frame = np.array(self.cache.frames(self.episode_ids[k], cam)[seen])
+            item[L.image_key(cam)] = torch.from_numpy(frame).movedim(-1, -3).contiguous()
         return item
 
 
@@ -183,3 +188,19 @@ class EpisodeOrderSampler(Sampler[list[int]]):
             if step >= start:
                 yield batch
             step += 1
+
+
+class RandomFrameSampler:
+    """Batches of uniformly drawn frames for memoryless policies. Batch k comes from a
+    generator seeded by (seed, k), so ``stream(start)`` resumes in O(1) and a resumed run sees
+    the batches an uninterrupted one would."""
+
+    def __init__(self, dataset: DemoDataset, batch_size: int, seed: int = 0):
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+        self.frames, self.batch_size, self.seed = len(dataset), batch_size, seed
+
+    def stream(self, start: int = 0) -> Iterator[list[int]]:
+        for step in itertools.count(start):
+            rng = np.random.default_rng([self.seed, step])
+            yield rng.integers(self.frames, size=self.batch_size).tolist()

@@ -92,3 +92,21 @@ def _mem0(arg, env):
 
 register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=gt_classifier,...]",
                 needs_argument=True)(_mem0)
+
+
+def _dp(arg, env):
+    from rmbench.policies.dp.agent import DPPolicy
+
+    return DPPolicy(arg, env)
+
+
+def _act(arg, env):
+    from rmbench.policies.act.agent import ACTPolicy
+
+    return ACTPolicy(arg, env)
+
+
+register_policy("dp", "Diffusion Policy from a checkpoint: dp:CKPT[?execute=N&ddim_steps=N]",
+                needs_argument=True)(_dp)
+register_policy("act", "ACT from a checkpoint: act:CKPT[?temporal_ensemble=M&execute=N]",
+                needs_argument=True)(_act)

@@ -26,6 +26,9 @@ def parse_overrides(config_cls, items: list[str]) -> dict[str, Any]:
     return out
 
 
+TRAINABLE = ("mem0", "dp", "act")
+
+
 def run_training(policy: str, dataset: str, out: str, *, steps: int, batch_size: int, device: str,
                  seed: int, save_every: int, ablations: list[str], overrides: list[str],
                  workers: int = 0, progress: bool = True) -> dict[str, Any]:
@@ -43,4 +46,15 @@ def run_training(policy: str, dataset: str, out: str, *, steps: int, batch_size:
         cfg = replace(Mem0Config(**parse_overrides(Mem0Config, overrides)),
                       ablations=tuple(ablations))
         return train_mem0(dataset, out, cfg, train_cfg, progress=progress, workers=workers)
-    raise ValueError(f"unknown policy {policy!r} to train; policies: mem0")
+    if policy in ("dp", "act"):
+        if ablations:
+            raise ValueError(f"--ablation is Mem-0's; {policy} has none")
+        if policy == "dp":
+            from rmbench.policies.dp.agent import train_dp as fit
+            from rmbench.policies.dp.config import DPConfig as config_cls
+        else:
+            from rmbench.policies.act.agent import train_act as fit
+            from rmbench.policies.act.config import ACTConfig as config_cls
+        cfg = config_cls(**parse_overrides(config_cls, overrides))
+        return fit(dataset, out, cfg, train_cfg, progress=progress, workers=workers)
+    raise ValueError(f"unknown policy {policy!r} to train; policies: {', '.join(TRAINABLE)}")

@@ -8,18 +8,11 @@ noise comes from the caller's generator, so a seeded episode samples the same ch
 
 from __future__ import annotations
 
-import math
-
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-
-def time_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
-    half = dim // 2
-    freqs = torch.exp(-math.log(1000.0) * torch.arange(half, device=t.device) / half)
-    angles = t[:, None].float() * 1000.0 * freqs[None]
-    return torch.cat([angles.sin(), angles.cos()], -1)
+from rmbench.policies.nn.embeddings import time_embedding
 
 
 class FlowMatchingHead(nn.Module):

@@ -17,7 +17,6 @@ from urllib.parse import parse_qsl
 import numpy as np
 import torch
 
-from rmbench.data.torch_dataset import resize
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
 from rmbench.policies.mem0.classifier import Debounce
@@ -25,6 +24,7 @@ from rmbench.policies.mem0.config import ABLATIONS, TRAINED_ABLATIONS, Mem0Confi
 from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import DONE
 from rmbench.policies.mem0.train import build_model, goal_text
+from rmbench.policies.observation import image_tensors, state_tensor
 
 
 def parse_argument(arg: str) -> tuple[Path, tuple[str, ...]]:
@@ -112,7 +112,7 @@ class Mem0Policy(BasePolicy):
         if self.t % cfg.memory_every == 0:
             self.memory.push(z)
         if not self.queue:
-            state = torch.as_tensor(np.asarray(observation["agent_pos"]), dtype=torch.float32)[None]
+            state = state_tensor(observation)
             normalised = ex.head.sample(ex.condition(c, state), cfg.flow_steps, self.generator)
             chunk = ex.normalizer.unaction(normalised, state)
             self.queue = list(chunk[0, :cfg.execute].double().numpy())
@@ -124,13 +124,7 @@ class Mem0Policy(BasePolicy):
 
     # ------------------------------------------------------------------ helpers
     def images(self, observation: dict[str, Any]) -> list[torch.Tensor]:
-        out = []
-        for cam in self.cfg.cameras:
-            frame = np.asarray(observation["pixels"][cam])
-            if frame.shape[:2] != tuple(self.cfg.image_size):
-                frame = resize(frame[None], tuple(self.cfg.image_size))[0]
-            out.append(torch.from_numpy(np.ascontiguousarray(frame)).permute(2, 0, 1)[None])
-        return out
+        return image_tensors(observation, self.cfg.cameras, self.cfg.image_size)
 
     def ended(self, c: torch.Tensor) -> bool:
         if self.cfg.gt_classifier:

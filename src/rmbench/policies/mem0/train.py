@@ -13,7 +13,6 @@ import torch
 
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset
-from rmbench.data.stats import from_json
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
 from rmbench.policies.mem0.classifier import end_labels
 from rmbench.policies.mem0.config import Mem0Config
@@ -82,13 +81,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
                    "planner": vectors[len(executor_texts):]}
     torch.manual_seed(train_cfg.seed)
     model = build_model(cfg, describe, vectors)
-    stats = from_json(json.loads((ds.root / L.STATS).read_text()))
-    if cfg.relative_actions:
-        low_dim = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
-        norm = Normalizer.from_episodes(stats, [ep.state for ep in low_dim],
-                                        [ep.action for ep in low_dim], cfg.horizon)
-    else:
-        norm = Normalizer.from_stats(stats)
+    norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
     model.executor.normalizer.load_state_dict(norm.state_dict())
     out = Path(out)
     planner_report = None

@@ -57,6 +57,21 @@ class Normalizer(nn.Module):
             norm.relative.copy_(torch.as_tensor(relative, dtype=torch.float32))
         return norm
 
+    @classmethod
+    def for_dataset(cls, ds, horizon: int, relative: bool) -> Normalizer:
+        """From a dataset (``rmbench.data.reader.Dataset``): its meta/stats.json, and for
+        relative actions the offsets' range measured over its episodes."""
+        import json
+
+        from rmbench.data.stats import from_json
+
+        stats = from_json(json.loads((ds.root / L.STATS).read_text()))
+        if not relative:
+            return cls.from_stats(stats)
+        low_dim = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
+        return cls.from_episodes(stats, [ep.state for ep in low_dim], [ep.action for ep in low_dim],
+                                 horizon)
+
     def _set_state(self, stats) -> None:
         with torch.no_grad():
             self.state_mean.copy_(torch.as_tensor(np.asarray(stats[L.STATE]["mean"]), dtype=torch.float32))

@@ -50,12 +50,15 @@ class SpatialSoftmax(nn.Module):
 
 
 class ImageEncoder(nn.Module):
-    """uint8 images (B, 3, H, W) -> one d-dim token per image.
+    """uint8 images (B, 3, H, W) -> one d-dim token per image, or with ``pooled=False`` a d-dim
+    feature map (B, d, H / 2^n, W / 2^n) for models that attend over image patches (ACT).
 
     ``channels`` are the stage widths; every stage halves the resolution (the stem too)."""
 
-    def __init__(self, dim: int, channels: tuple[int, ...] = (32, 64, 128, 128), keypoints: int = 32):
+    def __init__(self, dim: int, channels: tuple[int, ...] = (32, 64, 128, 128), keypoints: int = 32,
+                 pooled: bool = True):
         super().__init__()
+        self.pooled = pooled
         self.stem = nn.Sequential(nn.Conv2d(3, channels[0], 5, 2, 2, bias=False),
                                   nn.GroupNorm(_groups(channels[0]), channels[0]), nn.ReLU())
         stages, c = [], channels[0]
@@ -63,8 +66,11 @@ class ImageEncoder(nn.Module):
             stages.append(ResBlock(c, c_out, stride=2))
             c = c_out
         self.stages = nn.Sequential(*stages)
-        self.keypoints = SpatialSoftmax(c, keypoints)
-        self.out = nn.Sequential(nn.Linear(c + 2 * keypoints, dim), nn.LayerNorm(dim))
+        if pooled:
+            self.keypoints = SpatialSoftmax(c, keypoints)
+            self.out = nn.Sequential(nn.Linear(c + 2 * keypoints, dim), nn.LayerNorm(dim))
+        else:
+            self.out = nn.Conv2d(c, dim, 1)
         self.register_buffer("mean", torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1))
         self.register_buffer("std", torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1))
 
@@ -75,16 +81,20 @@ class ImageEncoder(nn.Module):
         x = images.contiguous()
         x = x.float() / 255.0 if x.dtype == torch.uint8 else x
         x = self.stages(self.stem((x - self.mean) / self.std))
+        if not self.pooled:
+            return self.out(x)
         return self.out(torch.cat([x.mean((2, 3)), self.keypoints(x)], -1))
 
 
 class CameraEncoders(nn.ModuleList):
     """One ImageEncoder per camera (the cameras see different things): a list of uint8
-    (B, 3, H, W) images, in camera order, -> tokens (B, cameras, dim). A ModuleList, so its
-    weights are named ``<name>.<camera index>.*``."""
+    (B, 3, H, W) images, in camera order, -> tokens (B, cameras, dim), or feature maps
+    (B, cameras, dim, h, w) when not ``pooled``. A ModuleList, so its weights are named
+    ``<name>.<camera index>.*``."""
 
-    def __init__(self, cameras: int, dim: int, channels: tuple[int, ...], keypoints: int):
-        super().__init__(ImageEncoder(dim, channels, keypoints) for _ in range(cameras))
+    def __init__(self, cameras: int, dim: int, channels: tuple[int, ...], keypoints: int,
+                 pooled: bool = True):
+        super().__init__(ImageEncoder(dim, channels, keypoints, pooled) for _ in range(cameras))
 
     def forward(self, images: list[torch.Tensor]) -> torch.Tensor:
         return torch.stack([enc(img) for enc, img in zip(self, images, strict=True)], 1)

@@ -1,0 +1,250 @@
+"""What the memoryless baselines (Diffusion Policy, ACT) share: a config base, the training
+step's plumbing, training on uniformly drawn frames, and the closed loop over a short
+observation window.
+
+A model here implements
+    ``observe(images, state) -> features``   one control step's observation, encoded once
+    ``predict(window, state, generator) -> (B, H, A)``   normalised action chunk from the last
+                                                         ``obs_steps`` features, oldest first
+and holds ``encoders`` (its CNNs) and ``normalizer``. Nothing carries over beyond the window:
+that is the point of these baselines on a memory benchmark.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+from typing import Any, ClassVar
+from urllib.parse import parse_qsl
+
+import numpy as np
+import torch
+from torch import nn
+
+from rmbench.data import layout as L
+from rmbench.data.reader import Dataset
+from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
+from rmbench.policies.base import BasePolicy
+from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
+from rmbench.policies.nn.normalize import Normalizer
+from rmbench.policies.nn.vision import color_jitter
+from rmbench.policies.observation import image_tensors, state_tensor
+from rmbench.tasks import get_task
+from rmbench.training.batches import batch_stream
+from rmbench.training.loop import TrainConfig, train
+
+ACTION_DIM = 14
+
+
+@dataclass(frozen=True)
+class VisuomotorConfig:
+    """Fields every baseline has; subclasses add theirs and may change these defaults."""
+
+    cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
+    """Cameras read, each through its own CNN (the same encoder Mem-0 uses)."""
+    image_size: tuple[int, int] = (96, 128)
+    """(height, width) the frames are resized to."""
+    encoder_channels: tuple[int, ...] = (32, 64, 128, 128)
+    """CNN stage widths; each stage halves the resolution."""
+    obs_steps: int = 1
+    """Observation window: the model sees this many most recent control steps."""
+    horizon: int = 16
+    """Actions predicted per chunk."""
+    execute: int = 8
+    """Actions executed from each chunk before predicting again."""
+    relative_actions: bool = True
+    """Joint targets as offsets from the current joint positions, grippers absolute, as in
+    Mem-0 here, so that the benchmark's comparison isolates memory. False: the published
+    absolute targets."""
+    lr: float = 1e-3
+    """Everything but the CNNs. The published rates (1e-4 DP, 1e-5 ACT) go with pretrained or
+    long GPU runs; at CPU scale (batch 32, a few thousand steps) Mem-0's measured 1e-3 is used."""
+    min_lr: float = 1e-5
+    lr_backbone: float = 1e-3
+    """The CNNs, trained from scratch."""
+    min_lr_backbone: float = 1e-5
+    jitter: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    """Colour jitter (brightness, contrast, saturation) in training."""
+
+    # fields an evaluation may change without retraining: POLICY:CKPT?execute=4
+    INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute",)
+
+    def __post_init__(self):
+        for f in fields(self):
+            if isinstance(getattr(self, f.name), list):
+                object.__setattr__(self, f.name, tuple(getattr(self, f.name)))
+        if not self.cameras:
+            raise ValueError("a visuomotor policy needs at least one camera")
+        if self.obs_steps < 1 or self.horizon < 1:
+            raise ValueError("obs_steps and horizon must be >= 1")
+        if not 1 <= self.execute <= self.horizon:
+            raise ValueError(f"execute ({self.execute}) must be in [1, horizon={self.horizon}]")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, raw: dict[str, Any]):
+        known = {f.name for f in fields(cls)}
+        unknown = set(raw) - known
+        if unknown:
+            raise ValueError(f"unknown {cls.__name__} fields {sorted(unknown)}")
+        return cls(**raw)
+
+
+class VisuomotorTrainer(nn.Module):
+    """The training step's shared parts: jittered images per camera (flattened over the
+    observation window), the two learning-rate groups, and the noise generator carried across
+    a resume. Subclasses implement ``forward(batch) -> (loss, logs)``."""
+
+    def __init__(self, model: nn.Module, seed: int):
+        super().__init__()
+        self.model = model
+        self.generator = torch.Generator().manual_seed(seed)
+
+    def observe(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The window's features (B, obs_steps, ...) through ``model.observe``."""
+        cfg = self.model.cfg
+        state = batch[L.STATE]
+        if cfg.obs_steps == 1:
+            state = state[:, None]
+        b, n = state.shape[:2]
+        images = []
+        for cam in cfg.cameras:
+            img = batch[L.image_key(cam)].reshape(b * n, *batch[L.image_key(cam)].shape[-3:])
+            images.append(color_jitter(img, self.generator, *cfg.jitter) if any(cfg.jitter) else img)
+        features = self.model.observe(images, state.reshape(b * n, -1))
+        return features.reshape(b, n, *features.shape[1:])
+
+    def target(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+        """Normalised action chunk, relative to the window's last state."""
+        state = batch[L.STATE] if self.model.cfg.obs_steps == 1 else batch[L.STATE][:, -1]
+        return self.model.normalizer.action(batch[L.ACTION], state)
+
+    def param_groups(self) -> list[dict]:
+        cfg = self.model.cfg
+        backbone = list(self.model.encoders.parameters())
+        ids = {id(p) for p in backbone}
+        return [{"name": "backbone", "params": backbone, "lr": cfg.lr_backbone,
+                 "min_lr": cfg.min_lr_backbone},
+                {"name": "heads", "params": [p for p in self.model.parameters() if id(p) not in ids],
+                 "lr": cfg.lr, "min_lr": cfg.min_lr}]
+
+    def extra_state(self) -> dict:
+        return {"generator": self.generator.get_state()}
+
+    def load_extra_state(self, state: dict) -> None:
+        self.generator.set_state(state["generator"].cpu())
+
+    def export_module(self) -> nn.Module:
+        return self.model
+
+
+def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Module],
+                     trainer_cls: type[VisuomotorTrainer], dataset: str | Path, out: str | Path,
+                     train_cfg: TrainConfig, progress: bool = True, workers: int = 0
+                     ) -> dict[str, Any]:
+    """Train a baseline on uniformly drawn frames of one task's dataset: the model is built
+    from ``cfg`` under the run's seed, its normaliser set from the dataset, then wrapped by the
+    trainer (an EMA copy then starts from the right statistics)."""
+    ds = Dataset(dataset)
+    task = get_task(ds.task)
+    describe = {"policy": policy, "config": cfg.to_dict(), "task": task.name, "tmc": task.tmc,
+                "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
+                            "frames": ds.num_frames}}
+    missing = sorted(set(cfg.cameras) - set(ds.cameras))
+    if missing:
+        raise ValueError(f"{dataset} has no {missing} camera(s) (has {list(ds.cameras)}); "
+                         f"train with --set 'cameras={json.dumps(list(ds.cameras))}'")
+    torch.manual_seed(train_cfg.seed)
+    model = model_cls(cfg)
+    norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
+    model.normalizer.load_state_dict(norm.state_dict())
+    trainer = trainer_cls(model, train_cfg.seed)
+    frames = DemoDataset(ds, chunk=cfg.horizon, cameras=list(cfg.cameras),
+                         image_size=cfg.image_size, history=cfg.obs_steps)
+
+    def batches(start: int, rank: int, world: int):
+        sampler = RandomFrameSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
+        return batch_stream(frames, sampler, start, workers)
+
+    return train(trainer, batches, train_cfg, out, describe, progress)
+
+
+def parse_argument(arg: str, config_cls) -> tuple[Path, dict[str, Any]]:
+    """``CKPT[?field=value&...]`` with inference-only config fields."""
+    path, _, query = arg.partition("?")
+    overrides: dict[str, Any] = {}
+    for key, value in parse_qsl(query):
+        if key not in config_cls.INFERENCE_FIELDS:
+            raise ValueError(f"unknown option {key!r}; options: "
+                             + ", ".join(config_cls.INFERENCE_FIELDS))
+        try:
+            overrides[key] = json.loads(value)
+        except json.JSONDecodeError:
+            raise ValueError(f"option {key}={value!r} is not a number or JSON value") from None
+    return Path(path), overrides
+
+
+class VisuomotorPolicy(BasePolicy):
+    """The closed loop: encode each step's observation once, keep the last ``obs_steps``
+    (the first repeated at an episode's start, as in training), predict a chunk when the last
+    one's ``execute`` actions are used up. Subclasses set ``name``, ``config_cls`` and
+    ``model_cls``, and may override ``schedule`` (ACT's temporal ensembling)."""
+
+    name: ClassVar[str]
+    config_cls: ClassVar[type]
+    model_cls: ClassVar[type]
+
+    def __init__(self, arg: str, env=None):
+        path, overrides = parse_argument(arg, self.config_cls)
+        describe = read_config(path, self.name)
+        try:
+            cfg = replace(self.config_cls.from_dict(describe["config"]), **overrides)
+        except (TypeError, ValueError) as err:
+            raise CheckpointError(f"{path}: {err}") from None
+        model = self.model_cls(cfg)
+        load_weights(path, model, describe["step"])
+        if env is not None and type(env.unwrapped.task).name != describe["task"]:
+            raise CheckpointError(f"{path} was trained on {describe['task']}, not "
+                                  f"{type(env.unwrapped.task).name}")
+        self._setup(model, describe)
+
+    @classmethod
+    def from_model(cls, model: nn.Module, describe: dict[str, Any] | None = None):
+        """A policy around an in-memory model (benchmarks, tests)."""
+        policy = cls.__new__(cls)
+        policy._setup(model, describe or {})
+        return policy
+
+    def _setup(self, model: nn.Module, describe: dict[str, Any]) -> None:
+        self.model, self.cfg, self.describe = model.eval(), model.cfg, describe
+        self.cameras = self.cfg.cameras
+        self.reset("", {})
+
+    def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
+        self.generator = torch.Generator().manual_seed(int(task_info.get("seed", 0)))
+        self.window: list[Any] = []
+        self.queue: list[np.ndarray] = []
+        self.t = 0
+
+    @torch.no_grad()
+    def act(self, observation: dict[str, Any]) -> np.ndarray:
+        state = state_tensor(observation)
+        features = self.model.observe(image_tensors(observation, self.cfg.cameras,
+                                                    self.cfg.image_size), state)
+        self.window = (self.window or [features] * self.cfg.obs_steps)[1:] + [features]
+        action = self.schedule(state)
+        self.t += 1
+        return action
+
+    def chunk(self, state: torch.Tensor) -> np.ndarray:
+        """A new chunk (H, 14) of absolute joint targets from the current window."""
+        normalised = self.model.predict(self.window, state, self.generator)
+        return self.model.normalizer.unaction(normalised, state)[0].double().numpy()
+
+    def schedule(self, state: torch.Tensor) -> np.ndarray:
+        if not self.queue:
+            self.queue = list(self.chunk(state)[:self.cfg.execute])
+        return self.queue.pop(0)
