@@ -1,18 +1,20 @@
-"""Policy speed on CPU: Mem-0's executor steps/s on one core with the default camera set, the
-planner's latency, and whether memory per step stays bounded.
+"""Policy speed on CPU: closed-loop steps/s on one core for Mem-0, Diffusion Policy and ACT
+with the default camera set, Mem-0's planner latency, memory per step, and training steps/s
+(forward, backward and AdamW on a batch of 32) for each.
 
-    python benchmarks/policy_speed.py [--steps 300] [--task press_button]
+    python benchmarks/policy_speed.py [--steps 300] [--train-steps 20] [--task press_button]
 
-The model is Mem-0's default configuration with random weights (speed does not depend on the
+Models are the default configurations with random weights (speed does not depend on the
 weights). Observations are real renders of the task's station (three cameras at 320x240),
-resized by the policy as in evaluation. Prints a table and writes
-benchmarks/results/policy_speed.json.
+resized by the policy as in evaluation. Training batches are built from the same renders.
+Prints a table and writes benchmarks/results/policy_speed.json.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import time
 from pathlib import Path
@@ -21,14 +23,23 @@ import numpy as np
 import torch
 
 import rmbench
+from rmbench.data import layout as L
+from rmbench.data.torch_dataset import resize
+from rmbench.policies.act.agent import ACTPolicy
+from rmbench.policies.act.config import ACTConfig
+from rmbench.policies.act.modeling import ACTModel, ACTTrainer
+from rmbench.policies.dp.agent import DPPolicy
+from rmbench.policies.dp.config import DPConfig
+from rmbench.policies.dp.modeling import DiffusionPolicyModel, DPTrainer
 from rmbench.policies.mem0.agent import Mem0Policy
 from rmbench.policies.mem0.config import Mem0Config
-from rmbench.policies.mem0.modeling import Mem0Model
+from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
 from rmbench.policies.mem0.planner import DONE
 from rmbench.policies.mem0.train import goal_text
 from rmbench.tasks import get_task
 
 OUT = Path(__file__).parent / "results" / "policy_speed.json"
+BATCH = 32
 
 
 def rss_mb() -> float:
@@ -39,14 +50,76 @@ def rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def closed_loop(policy, frames, steps: int) -> dict:
+    policy.reset("", {"seed": 0})
+    for k in range(20):  # warm-up
+        policy.act(frames[k % len(frames)])
+    rss0, t0 = rss_mb(), time.perf_counter()
+    for k in range(steps):
+        policy.act(frames[k % len(frames)])
+    step_s = (time.perf_counter() - t0) / steps
+    return {"step_ms": round(1000 * step_s, 2), "hz": round(1 / step_s, 1),
+            "rss_growth_mb": round(rss_mb() - rss0, 1)}
+
+
+def batch_from(frames, cfg, obs_steps: int, horizon: int) -> dict[str, torch.Tensor]:
+    """A training batch of BATCH items from the rendered frames, at the model's image size."""
+    rng = np.random.default_rng(0)
+    batch: dict[str, torch.Tensor] = {}
+    window = (obs_steps,) if obs_steps > 1 else ()
+    for cam in cfg.cameras:
+        imgs = resize(np.stack([f["pixels"][cam] for f in frames]), tuple(cfg.image_size))
+        pick = rng.integers(len(frames), size=(BATCH, *window))
+        batch[L.image_key(cam)] = torch.from_numpy(imgs[pick]).movedim(-1, -3).contiguous()
+    state = torch.from_numpy(np.stack([f["agent_pos"] for f in frames]).astype(np.float32))
+    batch[L.STATE] = state[rng.integers(len(frames), size=(BATCH, *window))]
+    batch[L.ACTION] = state[rng.integers(len(frames), size=(BATCH, horizon))]
+    batch["action_is_pad"] = torch.zeros(BATCH, horizon, dtype=torch.bool)
+    batch[L.SUBTASK_INDEX] = torch.zeros(BATCH, dtype=torch.long)
+    batch["text_index"] = torch.zeros(BATCH, dtype=torch.long)
+    batch["episode_start"] = torch.zeros(BATCH, dtype=torch.bool)
+    batch["end_label"] = torch.zeros(BATCH, dtype=torch.bool)
+    return batch
+
+
+def train_speed(trainer, batch, steps: int) -> dict:
+    trainer.train()
+    opt = torch.optim.AdamW([p for g in trainer.param_groups() for p in g["params"]], lr=1e-4)
+
+    def step():
+        loss, _ = trainer(batch)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        if hasattr(trainer, "after_step"):
+            trainer.after_step()
+
+    for _ in range(3):  # warm-up
+        step()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        step()
+    return {"train_steps_per_s": round(steps / (time.perf_counter() - t0), 2)}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps", type=int, default=300)
+    ap.add_argument("--train-steps", type=int, default=20)
     ap.add_argument("--task", default="press_button")
     args = ap.parse_args()
-    torch.set_num_threads(1)  # one core, as the target says
-    cfg = Mem0Config()
+    cores = len(os.sched_getaffinity(0))
     task = get_task(args.task)
+    env = rmbench.make(task.name, cameras=Mem0Config().cameras)
+    obs, info = env.reset(seed=100000)
+    frames = [obs]
+    for _ in range(20):  # a few distinct frames to cycle through
+        obs, *_ = env.step(env.action_space.sample())
+        frames.append(obs)
+    env.close()
+
+    # --- Mem-0
+    cfg = Mem0Config()
     subtasks = list(task.subtasks)
     describe = {"policy": "mem0", "task": task.name, "tmc": task.tmc,
                 "executor_texts": subtasks + [goal_text(task.name)],
@@ -54,28 +127,12 @@ def main() -> None:
     torch.manual_seed(0)
     model = Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], None)
     policy = Mem0Policy.from_model(model, describe)
-    env = rmbench.make(task.name, cameras=cfg.cameras)
-    obs, info = env.reset(seed=100000)
-    policy.reset(info["instruction"], {"seed": 100000})
-    frames = [obs]
-    for _ in range(20):  # a few distinct frames to cycle through
-        obs, *_ = env.step(env.action_space.sample())
-        frames.append(obs)
-    env.close()
-
-    for k in range(20):  # warm-up
-        policy.act(frames[k % len(frames)])
-    rss0 = rss_mb()
-    t0 = time.perf_counter()
-    for k in range(args.steps):
-        policy.act(frames[k % len(frames)])
-    step_s = (time.perf_counter() - t0) / args.steps
-    rss1 = rss_mb()
-
-    # the planner with a full key memory of 8 finished subtasks
+    torch.set_num_threads(1)  # one core, as the inference target says
+    results = {"mem0": closed_loop(policy, frames, args.steps)}
+    results["mem0"]["params"] = sum(p.numel() for p in model.executor.parameters())
     imgs = policy.images(frames[0])
     planner_cams = [imgs[i] for i in policy.planner_cams]
-    with torch.no_grad():
+    with torch.no_grad():  # the planner with a full key memory of 8 finished subtasks
         policy.first = model.planner.embed(planner_cams)
         policy.keys = [(k % len(subtasks), model.planner.embed(planner_cams)[0]) for k in range(8)]
         for _ in range(3):
@@ -84,29 +141,45 @@ def main() -> None:
         for _ in range(n):
             policy.keys = policy.keys[:8]
             policy.subtask_ended(imgs)  # embeds the end frame, stores it, plans
-        plan_s = (time.perf_counter() - t0) / n
+        results["mem0"]["planner_ms"] = round(1000 * (time.perf_counter() - t0) / n, 2)
+    results["mem0"]["memory_store_floats"] = int(policy.memory.anchor.numel()
+                                                 + policy.memory.sliding.numel())
 
-    params = sum(p.numel() for p in model.executor.parameters())
-    result = {
-        "task": task.name, "cameras": list(cfg.cameras), "image_size": list(cfg.image_size),
-        "threads": 1, "steps": args.steps, "executor_params": params,
-        "executor_step_ms": round(1000 * step_s, 2), "executor_hz": round(1 / step_s, 1),
-        "planner_ms": round(1000 * plan_s, 2), "rss_growth_mb": round(rss1 - rss0, 1),
-        "memory_store_floats": int(policy.memory.anchor.numel() + policy.memory.sliding.numel()),
-    }
-    rows = [("executor step (1 core)", f"{result['executor_step_ms']:.1f} ms",
-             f"{result['executor_hz']:.1f} Hz (target >= 20)"),
-            ("planner call (8 keys)", f"{result['planner_ms']:.1f} ms", "target < 100 ms"),
-            (f"RSS growth over {args.steps} steps", f"{result['rss_growth_mb']:.1f} MB",
-             "bounded memory"),
-            ("memory store", f"{result['memory_store_floats']} floats", "fixed size")]
-    w = max(len(r[0]) for r in rows)
-    for r in rows:
-        print(f"{r[0]:<{w}}  {r[1]:>14}  {r[2]}")
+    # --- the baselines
+    baselines = {"dp": (DPConfig(), DiffusionPolicyModel, DPPolicy, DPTrainer),
+                 "act": (ACTConfig(), ACTModel, ACTPolicy, ACTTrainer)}
+    for name, (bcfg, model_cls, policy_cls, _) in baselines.items():
+        torch.manual_seed(0)
+        bmodel = model_cls(bcfg)
+        results[name] = closed_loop(policy_cls.from_model(bmodel), frames, args.steps)
+        results[name]["params"] = sum(p.numel() for p in bmodel.parameters())
+
+    # --- training, on every core
+    torch.set_num_threads(cores)
+    torch.manual_seed(0)
+    mem0_trainer = Mem0Trainer(Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"],
+                                         None), BATCH, task.tmc == "M(n)", 0)
+    results["mem0"].update(train_speed(mem0_trainer, batch_from(frames, cfg, 1, cfg.horizon),
+                                       args.train_steps))
+    for name, (bcfg, model_cls, _, trainer_cls) in baselines.items():
+        trainer = trainer_cls(model_cls(bcfg), 0)
+        results[name].update(train_speed(trainer, batch_from(frames, bcfg, bcfg.obs_steps,
+                                                             bcfg.horizon), args.train_steps))
+
+    result = {"task": task.name, "cameras": list(cfg.cameras), "image_size": list(cfg.image_size),
+              "inference_threads": 1, "training_threads": cores, "batch_size": BATCH,
+              "steps": args.steps, "train_steps": args.train_steps, "policies": results}
+    print(f"{'policy':<8}{'params':>10}{'step (1 core)':>16}{'Hz':>8}{'RSS growth':>12}"
+          f"{f'train steps/s ({cores} cores, batch {BATCH})':>34}")
+    for name, r in results.items():
+        print(f"{name:<8}{r['params'] / 1e6:>9.2f}M{r['step_ms']:>13.1f} ms{r['hz']:>8.1f}"
+              f"{r['rss_growth_mb']:>9.1f} MB{r['train_steps_per_s']:>34.2f}")
+    print(f"Mem-0 planner call with 8 keys: {results['mem0']['planner_ms']:.1f} ms (target < 100); "
+          f"memory store {results['mem0']['memory_store_floats']} floats (fixed size); "
+          f"executor target >= 20 Hz")
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {OUT}")
-    assert np.isfinite(result["executor_step_ms"])
 
 
 if __name__ == "__main__":

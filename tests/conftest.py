@@ -47,3 +47,24 @@ def mn_dataset(tmp_path_factory):
     collect(CollectConfig("press_button", out, episodes=2, seed=0, cameras=("head", "left_wrist"),
                           width=64, height=48, progress=False))
     return out
+
+
+@pytest.fixture
+def interrupt_training(monkeypatch):
+    """``interrupt_training(run)`` calls ``run()`` with the training loop killed right after
+    its first checkpoint, as a SIGKILL would leave it."""
+    from rmbench.training import loop
+
+    def interrupt(run):
+        save = loop._save
+
+        def save_then_die(*args, **kw):
+            save(*args, **kw)
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(loop, "_save", save_then_die)
+        with pytest.raises(KeyboardInterrupt):
+            run()
+        monkeypatch.setattr(loop, "_save", save)
+
+    return interrupt

@@ -152,23 +152,14 @@ def test_baseline_overfits_a_tiny_dataset(name, dataset, tmp_path):
     assert after < error_ratio * before, (before, after)
 
 
-def test_resume_gives_the_weights_of_an_uninterrupted_run(ckpt, dataset, tmp_path, monkeypatch):
+def test_resume_gives_the_weights_of_an_uninterrupted_run(ckpt, dataset, tmp_path,
+                                                          interrupt_training):
     from safetensors.torch import load_file
-
-    from rmbench.training import loop
 
     name, _ = ckpt
     train_tiny(name, dataset, tmp_path / "a", steps=6)
-    save = loop._save
-
-    def save_then_die(*args, **kw):  # killed right after the step-3 checkpoint
-        save(*args, **kw)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(loop, "_save", save_then_die)
-    with pytest.raises(KeyboardInterrupt):
-        train_tiny(name, dataset, tmp_path / "b", steps=6)
-    monkeypatch.setattr(loop, "_save", save)
+    # killed right after the step-3 checkpoint
+    interrupt_training(lambda: train_tiny(name, dataset, tmp_path / "b", steps=6))
     assert train_tiny(name, dataset, tmp_path / "b", steps=6)["resumed_from"] == 3
     a, b = load_file(tmp_path / "a" / "model.safetensors"), load_file(tmp_path / "b" / "model.safetensors")
     assert a.keys() == b.keys()

@@ -171,22 +171,13 @@ def test_planner_learns_the_demonstrated_order(mn_dataset, tmp_path):
     assert report["train_accuracy"] >= 0.9, report
 
 
-def test_resume_gives_the_weights_of_an_uninterrupted_run(mn_dataset, tmp_path, monkeypatch):
+def test_resume_gives_the_weights_of_an_uninterrupted_run(mn_dataset, tmp_path,
+                                                          interrupt_training):
     from safetensors.torch import load_file
 
-    from rmbench.training import loop
-
     train_tiny(mn_dataset, tmp_path / "a", steps=6)
-    save = loop._save
-
-    def save_then_die(*args, **kw):  # killed right after the step-3 checkpoint
-        save(*args, **kw)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(loop, "_save", save_then_die)
-    with pytest.raises(KeyboardInterrupt):
-        train_tiny(mn_dataset, tmp_path / "b", steps=6)
-    monkeypatch.setattr(loop, "_save", save)
+    # killed right after the step-3 checkpoint
+    interrupt_training(lambda: train_tiny(mn_dataset, tmp_path / "b", steps=6))
     result = train_tiny(mn_dataset, tmp_path / "b", steps=6)
     assert result["resumed_from"] == 3
     a, b = load_file(tmp_path / "a" / "model.safetensors"), load_file(tmp_path / "b" / "model.safetensors")
