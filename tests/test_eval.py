@@ -122,10 +122,12 @@ def test_replay_of_a_dataset_succeeds_on_its_own_seeds(dataset, tmp_path):
 
 
 def test_unknown_policy_lists_the_known_ones(tmp_path):
-    with pytest.raises(UnknownPolicyError, match=r"unknown policy 'dp'.*expert.*replay:ARG"):
-        cfg(tmp_path, policy="dp")
-    with pytest.raises(UnknownPolicyError, match="needs an argument"):
-        cfg(tmp_path, policy="replay")
+    with pytest.raises(UnknownPolicyError,
+                       match=r"unknown policy 'pi0'.*expert.*replay:ARG.*dp:ARG.*act:ARG"):
+        cfg(tmp_path, policy="pi0")
+    for name in ("replay", "dp", "act", "mem0"):
+        with pytest.raises(UnknownPolicyError, match="needs an argument"):
+            cfg(tmp_path, policy=name)
 
 
 def test_report_renders_markdown_and_html(tmp_path):
