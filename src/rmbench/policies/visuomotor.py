@@ -13,7 +13,7 @@ that is the point of these baselines on a memory benchmark.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 from urllib.parse import parse_qsl
@@ -27,6 +27,7 @@ from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
+from rmbench.policies.config import PolicyConfig
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.vision import color_jitter
 from rmbench.policies.observation import image_tensors, state_tensor
@@ -38,7 +39,7 @@ ACTION_DIM = 14
 
 
 @dataclass(frozen=True)
-class VisuomotorConfig:
+class VisuomotorConfig(PolicyConfig):
     """Fields every baseline has; subclasses add theirs and may change these defaults."""
 
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
@@ -71,26 +72,13 @@ class VisuomotorConfig:
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute",)
 
     def __post_init__(self):
-        for f in fields(self):
-            if isinstance(getattr(self, f.name), list):
-                object.__setattr__(self, f.name, tuple(getattr(self, f.name)))
+        super().__post_init__()
         if not self.cameras:
             raise ValueError("a visuomotor policy needs at least one camera")
         if self.obs_steps < 1 or self.horizon < 1:
             raise ValueError("obs_steps and horizon must be >= 1")
         if not 1 <= self.execute <= self.horizon:
             raise ValueError(f"execute ({self.execute}) must be in [1, horizon={self.horizon}]")
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, raw: dict[str, Any]):
-        known = {f.name for f in fields(cls)}
-        unknown = set(raw) - known
-        if unknown:
-            raise ValueError(f"unknown {cls.__name__} fields {sorted(unknown)}")
-        return cls(**raw)
 
 
 class VisuomotorTrainer(nn.Module):

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
-from typing import Any
+from dataclasses import dataclass
+
+from rmbench.policies.config import PolicyConfig
 
 # Ablations that change what is trained (a checkpoint is trained with them) and those that
 # only change inference (any checkpoint can run them).
@@ -13,7 +14,7 @@ ABLATIONS = TRAINED_ABLATIONS + INFERENCE_ABLATIONS
 
 
 @dataclass(frozen=True)
-class Mem0Config:
+class Mem0Config(PolicyConfig):
     # --- observation
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
     """Cameras the executor reads, each through its own CNN."""
@@ -84,9 +85,7 @@ class Mem0Config:
     """Any of no_anchor, no_sliding, no_memory, no_key (trained) and gt_classifier (inference)."""
 
     def __post_init__(self):
-        for name in ("cameras", "image_size", "encoder_channels", "jitter", "planner_cameras",
-                     "ablations"):
-            object.__setattr__(self, name, tuple(getattr(self, name)))
+        super().__post_init__()
         unknown = set(self.ablations) - set(ABLATIONS)
         if unknown:
             raise ValueError(f"unknown ablation {sorted(unknown)}; ablations: {', '.join(ABLATIONS)}")
@@ -122,14 +121,3 @@ class Mem0Config:
 
     def trained_ablations(self) -> tuple[str, ...]:
         return tuple(a for a in self.ablations if a in TRAINED_ABLATIONS)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, raw: dict[str, Any]) -> Mem0Config:
-        known = {f.name for f in fields(cls)}
-        unknown = set(raw) - known
-        if unknown:
-            raise ValueError(f"unknown Mem-0 config fields {sorted(unknown)}")
-        return cls(**raw)
