@@ -23,6 +23,9 @@ class _Stream:
 def batch_stream(dataset: Dataset, sampler, start: int, workers: int = 0
                  ) -> Iterator[dict[str, torch.Tensor]]:
     """Batches of ``sampler`` (anything with ``stream(start)``) from global batch ``start``."""
+    # A DataLoader draws its workers' base seed from the global RNG unless given a generator.
+    # A resumed run builds its loader after restoring that RNG, so the draw would shift every
+    # later global draw (dropout) against an uninterrupted run: the loader gets its own.
     loader = DataLoader(dataset, batch_sampler=_Stream(sampler, start), num_workers=workers,
-                        collate_fn=default_collate)
+                        collate_fn=default_collate, generator=torch.Generator().manual_seed(0))
     return iter(loader)

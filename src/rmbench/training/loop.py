@@ -121,6 +121,8 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     if start >= cfg.steps:
         log.info("%s: already trained for %d steps", out, start)
         return {"steps": start, "resumed_from": start}
+    # the clip's norm covers what is optimised: a frozen part (Mem-0's planner) is not in it
+    trained = [p for g in opt.param_groups for p in g["params"]]
     trainer = (torch.nn.parallel.DistributedDataParallel(model) if dist.world > 1 else model)
     lead = dist.rank == 0
     rows: list[dict[str, Any]] = []
@@ -139,7 +141,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
             raise TrainingError(f"step {step}: loss is {loss.item()} (logs {logs})")
         opt.zero_grad(set_to_none=True)
         loss.backward()
-        grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        grad_norm = torch.nn.utils.clip_grad_norm_(trained, cfg.grad_clip)
         opt.step()
         if hasattr(model, "after_step"):
             model.after_step()

@@ -125,12 +125,13 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
         loss, acc = planner_loss(planner, batch)
         opt.zero_grad(set_to_none=True)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(planner.parameters(), train_cfg.grad_clip)
+        torch.nn.utils.clip_grad_norm_(trainable, train_cfg.grad_clip)
         opt.step()
         loss_ema = 0.98 * loss_ema + 0.02 * loss.item() if step else loss.item()
         acc_ema = 0.98 * acc_ema + 0.02 * float(acc) if step else float(acc)
         if progress and (step + 1) % 100 == 0:
             log.info("planner step %d: loss %.4f, accuracy %.3f", step + 1, loss_ema, acc_ema)
+    opt.zero_grad(set_to_none=True)  # the frozen planner carries no gradients into the executor's run
     planner.eval()
     with torch.no_grad():
         correct = 0
