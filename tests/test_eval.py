@@ -141,3 +141,7 @@ def test_report_renders_markdown_and_html(tmp_path):
     assert "<svg" in page and "seed-100000.mp4" in page
     with pytest.raises(ValueError, match="no published numbers"):
         write_report([tmp_path / "out"], tmp_path / "r.md", ["GPT"])
+    named = write_report([tmp_path / "out"], tmp_path / "n.md", [], ["scripted"]).read_text()
+    assert "| task | TMC | scripted |" in named and "scripted: `expert`" in named
+    with pytest.raises(ValueError, match="2 labels for 1 evaluation folders"):
+        write_report([tmp_path / "out"], tmp_path / "r.md", [], ["a", "b"])

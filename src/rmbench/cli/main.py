@@ -144,7 +144,7 @@ def cmd_serve(args) -> int:
 def cmd_report(args) -> int:
     from rmbench.eval.report import write_report
 
-    out = write_report(args.dirs, args.out, args.published or [])
+    out = write_report(args.dirs, args.out, args.published or [], args.labels)
     print(f"wrote {out}")
     return 0
 
@@ -241,6 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="report.md", help="report.md or report.html")
     p.add_argument("--published", nargs="*", metavar="POLICY",
                    help="add published success rates: DP ACT Pi0.5 X-VLA Mem-0")
+    p.add_argument("--labels", nargs="+", metavar="NAME",
+                   help="column names, one per DIR in order (default: the policy spec)")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("serve", help="serve a policy over a websocket (msgpack-numpy)")

@@ -35,9 +35,13 @@ PUBLISHED = {
 }
 
 
-def load_runs(folders: list[str | Path]) -> list[dict]:
+def load_runs(folders: list[str | Path], labels: list[str] | None = None) -> list[dict]:
+    """Each folder's summary and videos; a column is named by its label, else by the policy
+    spec the evaluation ran (which holds the checkpoint's path)."""
+    if labels and len(labels) != len(folders):
+        raise ValueError(f"{len(labels)} labels for {len(folders)} evaluation folders")
     runs = []
-    for folder in folders:
+    for k, folder in enumerate(folders):
         path = Path(folder) / "summary.json"
         if not path.exists():
             raise ValueError(f"{folder}: no summary.json (not an `rmbench eval` folder)")
@@ -48,7 +52,8 @@ def load_runs(folders: list[str | Path]) -> list[dict]:
                 if r.get("video"):
                     videos.setdefault(task, []).append((r["seed"], r["success"],
                                                         str(Path(folder) / task / r["video"])))
-        runs.append({"name": summary["policy"], "folder": str(folder), "summary": summary,
+        runs.append({"name": labels[k] if labels else summary["policy"],
+                     "policy": summary["policy"], "folder": str(folder), "summary": summary,
                      "videos": videos})
     return runs
 
@@ -97,7 +102,9 @@ def markdown(runs: list[dict], published: list[str]) -> str:
             cells = [f"**{r[0]}**" if bold else r[0], r[1]] + [_fmt(v) for v in r[2:]]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
-    lines += ["Runs: " + ", ".join(f"`{r['name']}` ({r['folder']})" for r in runs), ""]
+    lines += ["Runs: " + ", ".join(
+        f"{r['name']}: `{r['policy']}` ({r['folder']})" if r["name"] != r["policy"]
+        else f"`{r['name']}` ({r['folder']})" for r in runs), ""]
     return "\n".join(lines)
 
 
@@ -146,11 +153,12 @@ def html_report(runs: list[dict], published: list[str]) -> str:
     return "\n".join(out) + "\n"
 
 
-def write_report(folders: list[str | Path], out: str | Path, published: list[str]) -> Path:
+def write_report(folders: list[str | Path], out: str | Path, published: list[str],
+                 labels: list[str] | None = None) -> Path:
     unknown = sorted(set(published) - set(PUBLISHED))
     if unknown:
         raise ValueError(f"no published numbers for {unknown}; known: {sorted(PUBLISHED)}")
-    runs = load_runs(folders)
+    runs = load_runs(folders, labels)
     out = Path(out)
     text = html_report(runs, published) if out.suffix == ".html" else markdown(runs, published)
     write_atomic(out, text.encode())
