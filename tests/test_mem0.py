@@ -222,8 +222,16 @@ def test_bad_checkpoints_give_one_line_errors(mn_ckpt, tmp_path):
         Mem0Policy(str(tmp_path / "nothing"))
     with pytest.raises(CheckpointError, match="trained without no_anchor"):
         Mem0Policy(f"{mn_ckpt}?ablation=no_anchor")
-    with pytest.raises(ValueError, match="unknown mem0 option"):
+    with pytest.raises(ValueError, match="unknown option 'speed'; options: ablation, execute, flow_steps"):
         Mem0Policy(f"{mn_ckpt}?speed=2")
+    with pytest.raises(ValueError, match="unknown ablation"):
+        Mem0Policy(f"{mn_ckpt}?ablation=no_brain")
+    with pytest.raises(CheckpointError, match="execute"):
+        Mem0Policy(f"{mn_ckpt}?execute=99")
+    env = make("press_button", render=False)
+    cfg = Mem0Policy(f"{mn_ckpt}?execute=2&flow_steps=3&ablation=gt_classifier", env).cfg
+    assert (cfg.execute, cfg.flow_steps, cfg.gt_classifier) == (2, 3, True)
+    env.close()
     env = make("put_back_block", render=False)
     with pytest.raises(CheckpointError, match="trained on press_button"):
         Mem0Policy(str(mn_ckpt), env)

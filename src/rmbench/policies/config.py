@@ -1,16 +1,23 @@
 """The base every learned policy's settings derive from: a frozen dataclass stored as JSON in
 each checkpoint. JSON has no tuples, so lists read back from a checkpoint (or given as
 ``--set field=[...]``) become tuples again here, keeping configs hashable and equal to the
-ones that were saved."""
+ones that were saved. Also the ``POLICY:CKPT?option=value`` argument every learned policy
+takes in ``rmbench eval`` and ``rmbench serve``."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass, fields
-from typing import Any
+from pathlib import Path
+from typing import Any, ClassVar
+from urllib.parse import parse_qsl
 
 
 @dataclass(frozen=True)
 class PolicyConfig:
+    # fields an evaluation may change without retraining: POLICY:CKPT?execute=4
+    INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ()
+
     def __post_init__(self):
         for f in fields(self):
             if isinstance(getattr(self, f.name), list):
@@ -27,3 +34,24 @@ class PolicyConfig:
         if unknown:
             raise ValueError(f"unknown {cls.__name__} fields {sorted(unknown)}")
         return cls(**raw)
+
+
+def parse_argument(arg: str, config_cls: type[PolicyConfig], extra: tuple[str, ...] = ()
+                   ) -> tuple[Path, dict[str, Any], dict[str, str]]:
+    """``CKPT[?option=value&...]``: the checkpoint folder, the config overrides (the class's
+    ``INFERENCE_FIELDS``, values as JSON) and the policy's own ``extra`` options (raw text)."""
+    path, _, query = arg.partition("?")
+    known = tuple(extra) + tuple(config_cls.INFERENCE_FIELDS)
+    overrides: dict[str, Any] = {}
+    options: dict[str, str] = {}
+    for key, value in parse_qsl(query):
+        if key not in known:
+            raise ValueError(f"unknown option {key!r}; options: {', '.join(known)}")
+        if key in extra:
+            options[key] = value
+            continue
+        try:
+            overrides[key] = json.loads(value)
+        except json.JSONDecodeError:
+            raise ValueError(f"option {key}={value!r} is not a number or JSON value") from None
+    return Path(path), overrides, options

@@ -16,7 +16,6 @@ import json
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
-from urllib.parse import parse_qsl
 
 import numpy as np
 import torch
@@ -27,7 +26,7 @@ from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
-from rmbench.policies.config import PolicyConfig
+from rmbench.policies.config import PolicyConfig, parse_argument
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.vision import color_jitter
 from rmbench.policies.observation import image_tensors, state_tensor
@@ -68,7 +67,6 @@ class VisuomotorConfig(PolicyConfig):
     jitter: tuple[float, float, float] = (0.1, 0.1, 0.1)
     """Colour jitter (brightness, contrast, saturation) in training."""
 
-    # fields an evaluation may change without retraining: POLICY:CKPT?execute=4
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute",)
 
     def __post_init__(self):
@@ -160,21 +158,6 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
     return train(trainer, batches, train_cfg, out, describe, progress)
 
 
-def parse_argument(arg: str, config_cls) -> tuple[Path, dict[str, Any]]:
-    """``CKPT[?field=value&...]`` with inference-only config fields."""
-    path, _, query = arg.partition("?")
-    overrides: dict[str, Any] = {}
-    for key, value in parse_qsl(query):
-        if key not in config_cls.INFERENCE_FIELDS:
-            raise ValueError(f"unknown option {key!r}; options: "
-                             + ", ".join(config_cls.INFERENCE_FIELDS))
-        try:
-            overrides[key] = json.loads(value)
-        except json.JSONDecodeError:
-            raise ValueError(f"option {key}={value!r} is not a number or JSON value") from None
-    return Path(path), overrides
-
-
 class VisuomotorPolicy(BasePolicy):
     """The closed loop: encode each step's observation once, keep the last ``obs_steps``
     (the first repeated at an episode's start, as in training), predict a chunk when the last
@@ -186,7 +169,7 @@ class VisuomotorPolicy(BasePolicy):
     model_cls: ClassVar[type]
 
     def __init__(self, arg: str, env=None):
-        path, overrides = parse_argument(arg, self.config_cls)
+        path, overrides, _ = parse_argument(arg, self.config_cls)
         describe = read_config(path, self.name)
         try:
             cfg = replace(self.config_cls.from_dict(describe["config"]), **overrides)

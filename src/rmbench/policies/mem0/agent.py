@@ -12,42 +12,36 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
-from urllib.parse import parse_qsl
 
 import numpy as np
 import torch
 
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
+from rmbench.policies.config import parse_argument
 from rmbench.policies.mem0.classifier import Debounce
-from rmbench.policies.mem0.config import ABLATIONS, TRAINED_ABLATIONS, Mem0Config
+from rmbench.policies.mem0.config import TRAINED_ABLATIONS, Mem0Config
 from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import DONE
 from rmbench.policies.mem0.train import build_model, goal_text
 from rmbench.policies.observation import image_tensors, state_tensor
 
 
-def parse_argument(arg: str) -> tuple[Path, tuple[str, ...]]:
-    path, _, query = arg.partition("?")
-    options = dict(parse_qsl(query))
-    ablations = tuple(a for a in options.pop("ablation", "").split(",") if a)
-    if options:
-        raise ValueError(f"unknown mem0 option(s) {sorted(options)}; options: ablation")
-    unknown = set(ablations) - set(ABLATIONS)
-    if unknown:
-        raise ValueError(f"unknown ablation {sorted(unknown)}; ablations: {', '.join(ABLATIONS)}")
-    return Path(path), ablations
-
-
-def load_mem0(path: str | Path, ablations: tuple[str, ...] = ()):
-    """(model, config, describe) from a checkpoint; inference ablations added."""
+def load_mem0(path: str | Path, ablations: tuple[str, ...] = (),
+              overrides: dict[str, Any] | None = None):
+    """(model, config, describe) from a checkpoint; inference ablations added and inference
+    fields (``Mem0Config.INFERENCE_FIELDS``) overridden."""
     describe = read_config(path, "mem0")
     cfg = Mem0Config.from_dict(describe["config"])
     missing = [a for a in ablations if a in TRAINED_ABLATIONS and a not in cfg.ablations]
     if missing:
         raise CheckpointError(f"{path} was trained without {missing[0]}, which changes training: "
                               f"rmbench train mem0 --ablation {missing[0]}")
-    cfg = replace(cfg, ablations=tuple(dict.fromkeys(cfg.ablations + ablations)))
+    try:
+        cfg = replace(cfg, ablations=tuple(dict.fromkeys(cfg.ablations + ablations)),
+                      **(overrides or {}))
+    except (TypeError, ValueError) as err:
+        raise CheckpointError(f"{path}: {err}") from None
     model = build_model(cfg, describe)
     load_weights(path, model, describe["step"])
     model.eval()
@@ -56,8 +50,9 @@ def load_mem0(path: str | Path, ablations: tuple[str, ...] = ()):
 
 class Mem0Policy(BasePolicy):
     def __init__(self, arg: str, env=None):
-        path, ablations = parse_argument(arg)
-        model, cfg, describe = load_mem0(path, ablations)
+        path, overrides, options = parse_argument(arg, Mem0Config, extra=("ablation",))
+        ablations = tuple(a for a in options.get("ablation", "").split(",") if a)
+        model, cfg, describe = load_mem0(path, ablations, overrides)
         if env is not None and type(env.unwrapped.task).name != describe["task"]:
             raise CheckpointError(f"{path} was trained on {describe['task']}, not "
                                   f"{type(env.unwrapped.task).name}")

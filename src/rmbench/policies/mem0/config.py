@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 from rmbench.policies.config import PolicyConfig
 
@@ -15,6 +16,9 @@ ABLATIONS = TRAINED_ABLATIONS + INFERENCE_ABLATIONS
 
 @dataclass(frozen=True)
 class Mem0Config(PolicyConfig):
+    # changeable at evaluation without retraining: mem0:CKPT?execute=5&flow_steps=20
+    INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps")
+
     # --- observation
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
     """Cameras the executor reads, each through its own CNN."""
