@@ -156,11 +156,14 @@ def planner_batch(planner, cache: FrameCache, cfg: Mem0Config, picks, gen, devic
             out.append(color_jitter(img, gen, *cfg.jitter) if gen is not None else img)
         return out
 
+    # o_0 and the key frames of each pick; with no_key the current frame alone
+    times = [[0] + [f for _, f in x.keys] if planner.use_key else [x.current] for x in picks]
+    # one embedding call for the whole batch (per camera: every pick's frames in turn)
+    per_camera = zip(*(frames(x.episode, ts) for x, ts in zip(picks, times, strict=True)),
+                     strict=True)
+    embedded = planner.embed([torch.cat(imgs).to(device) for imgs in per_camera])
     firsts, keys, texts, valid = [], [], [], []
-    for x in picks:
-        # o_0 and the key frames; with no_key the current frame alone
-        ts = [0] + [f for _, f in x.keys] if planner.use_key else [x.current]
-        emb = planner.embed([f.to(device) for f in frames(x.episode, ts)])
+    for x, ts, emb in zip(picks, times, embedded.split([len(ts) for ts in times]), strict=True):
         firsts.append(emb[0])
         k = torch.zeros(m, emb.shape[1], device=device)
         k[:len(ts) - 1] = emb[1:]
