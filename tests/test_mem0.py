@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from rmbench.data.reader import Dataset
 from rmbench.envs.registration import make
 from rmbench.policies.checkpoint import CheckpointError
 from rmbench.policies.mem0.agent import Mem0Policy
@@ -282,3 +283,18 @@ def test_vlm_planner_backend_trains_with_lora(mn_dataset, tmp_path):
     policy.reset(info["instruction"], {"seed": 100000})
     assert policy.act(obs).shape == (14,)
     env.close()
+
+
+def test_open_loop_error_walks_the_agent_over_recorded_frames(mn_ckpt, mn_dataset):
+    from rmbench.eval.open_loop import open_loop_error
+
+    hold = open_loop_error("noop", str(mn_dataset), [0, 1])
+    # holding still is its own reference, frame for frame
+    assert hold["error"] == pytest.approx(hold["hold_error"], abs=1e-12) and hold["error"] > 0
+    assert [r["frames"] for r in hold["episodes"]] == [
+        len(Dataset(mn_dataset).episode(e, cameras=[]).action) for e in (0, 1)]
+    mem0 = open_loop_error(f"mem0:{mn_ckpt}", str(mn_dataset), [1])
+    assert mem0["hold_error"] == hold["episodes"][1]["hold_error"]
+    assert np.isfinite(mem0["error"]) and mem0["error"] != mem0["hold_error"]
+    with pytest.raises(ValueError, match="episode 5 is not in"):
+        open_loop_error("noop", str(mn_dataset), [5])

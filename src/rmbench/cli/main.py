@@ -141,6 +141,21 @@ def cmd_serve(args) -> int:
     return 0
 
 
+def cmd_open_loop(args) -> int:
+    from rmbench.eval.open_loop import open_loop_error
+
+    result = open_loop_error(args.policy, args.dataset, args.indices)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"{'episode':>7} {'seed':>6} {'frames':>6} {'policy':>8} {'hold':>8}")
+    for r in result["episodes"]:
+        print(f"{r['episode']:>7} {r['seed']:>6} {r['frames']:>6} {r['error']:>8.4f} "
+              f"{r['hold_error']:>8.4f}")
+    print(f"{'all':>7} {'':>6} {'':>6} {result['error']:>8.4f} {result['hold_error']:>8.4f}")
+    return 0
+
+
 def cmd_report(args) -> int:
     from rmbench.eval.report import write_report
 
@@ -235,6 +250,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=0, help="data-loading processes")
     _add_json(p)
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("open-loop", help="a policy's action error on recorded demonstrations, "
+                                         "fed the recorded observations, beside holding still")
+    p.add_argument("--policy", required=True, help="policy spec, e.g. mem0:CKPT")
+    p.add_argument("--dataset", required=True, help="an rmbench dataset folder")
+    p.add_argument("--episodes", type=int, nargs="+", default=[0, 1], metavar="E",
+                   dest="indices", help="episode indices (default: 0 1)")
+    _add_json(p)
+    p.set_defaults(func=cmd_open_loop)
 
     p = sub.add_parser("report", help="tasks x policies table from evaluation folders")
     p.add_argument("dirs", nargs="+", metavar="DIR", help="rmbench eval output folders")

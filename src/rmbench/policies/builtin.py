@@ -90,7 +90,7 @@ def _mem0(arg, env):
     return Mem0Policy(arg, env)
 
 
-register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=gt_classifier,...]",
+register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&execute=N&flow_steps=N]",
                 needs_argument=True)(_mem0)
 
 

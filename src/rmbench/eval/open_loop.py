@@ -1,0 +1,56 @@
+"""Open-loop action error: a policy walked through recorded demonstrations, each step fed the
+recorded observation, its action compared with the recorded one.
+
+It separates "has not fitted the demonstrations" from "fitted them but drifts in closed loop"
+when a success rate is zero. The policy runs its own closed-loop code (observation window,
+memory, chunk queue), so the error covers what ``rmbench eval`` runs. The reference is holding
+the current joint positions (the noop policy), which a fitted policy should beat by far.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from rmbench.data import layout as L
+from rmbench.data.reader import Dataset
+from rmbench.data.torch_dataset import DemoDataset
+from rmbench.policies.registry import make_policy
+
+
+def open_loop_error(spec: str, dataset: str, episodes: list[int]) -> dict[str, Any]:
+    """Mean absolute difference (joints in rad, grippers in the action space's units) between
+    the policy's action and the recorded one at every frame of ``episodes``, and the same for holding still.
+    The policy is built without an environment, as for ``rmbench serve``."""
+    ds = Dataset(dataset)
+    bad = [e for e in episodes if not 0 <= e < ds.num_episodes]
+    if bad:
+        raise ValueError(f"episode {bad[0]} is not in {dataset} ({ds.num_episodes} episodes)")
+    policy = make_policy(spec, None)
+    cameras = tuple(getattr(policy, "cameras", ()))
+    missing = sorted(set(cameras) - set(ds.cameras))
+    if missing:
+        raise ValueError(f"{spec} reads camera {missing[0]!r}, which {dataset} does not hold")
+    size = tuple(policy.cfg.image_size) if cameras else None
+    seeds = [int(row["rmbench/seed"]) for row in ds.episodes]
+    per_episode = []
+    for e in episodes:
+        frames = DemoDataset(ds, chunk=1, cameras=list(cameras), image_size=size, episodes=[e])
+        policy.reset("", {"seed": seeds[e]})
+        err, hold = [], []
+        for t in range(len(frames)):
+            item = frames[t]
+            state = item[L.STATE].numpy().astype(np.float64)
+            obs = {"agent_pos": state,
+                   "pixels": {c: item[L.image_key(c)].permute(1, 2, 0).numpy() for c in cameras}}
+            recorded = item[L.ACTION][0].numpy().astype(np.float64)
+            err.append(np.abs(np.asarray(policy.act(obs), np.float64) - recorded).mean())
+            hold.append(np.abs(state - recorded).mean())
+        per_episode.append({"episode": e, "seed": seeds[e], "frames": len(frames),
+                            "error": float(np.mean(err)), "hold_error": float(np.mean(hold))})
+    policy.close()
+    frames_total = sum(r["frames"] for r in per_episode)
+    return {"policy": spec, "dataset": str(dataset), "episodes": per_episode,
+            "error": sum(r["error"] * r["frames"] for r in per_episode) / frames_total,
+            "hold_error": sum(r["hold_error"] * r["frames"] for r in per_episode) / frames_total}
