@@ -25,13 +25,14 @@ def task_name(request):
     return request.param
 
 
-def run_expert_steps(env, expert, seed, steps):
-    """Roll the expert for ``steps`` steps; return observations and actions."""
+def roll_out(env, policy, seed, steps):
+    """Roll ``policy`` (an expert or any Policy) for up to ``steps`` steps from ``seed``,
+    stopping where the episode ends; return observations and actions."""
     obs, info = env.reset(seed=seed)
-    expert.reset(info["instruction"], info)
+    policy.reset(info["instruction"], {**info, "seed": seed})
     observations, actions = [obs], []
     for _ in range(steps):
-        action = expert.act(obs)
+        action = policy.act(obs)
         obs, _, terminated, truncated, _ = env.step(action)
         observations.append(obs)
         actions.append(action)

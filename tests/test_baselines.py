@@ -19,6 +19,7 @@ from rmbench.policies.dp.config import DPConfig
 from rmbench.policies.nn.diffusion import DDPMSchedule
 from rmbench.policies.nn.unet1d import ConditionalUnet1D
 from rmbench.training.loop import TrainConfig
+from tests.conftest import roll_out
 
 SMALL = {"cameras": ("head", "left_wrist"), "image_size": (48, 64), "encoder_channels": (8, 16, 16),
          "jitter": (0.0, 0.0, 0.0)}
@@ -174,19 +175,9 @@ def test_checkpoint_round_trip_gives_identical_actions(ckpt):
     name, path = ckpt
     policy_cls = BASELINES[name][2]
     env = make("observe_and_pickup", cameras=("head", "left_wrist"), width=64, height=48)
-    runs = []
-    for _ in range(2):
-        policy = policy_cls(str(path), env)
-        obs, info = env.reset(seed=100001)
-        policy.reset(info["instruction"], {"seed": 100001})
-        acts = []
-        for _ in range(6):
-            a = policy.act(obs)
-            acts.append(a)
-            obs, _, terminated, truncated, _ = env.step(a)
-            if terminated or truncated:  # an untrained policy may fail the task at once
-                break
-        runs.append(np.stack(acts))
+    # an untrained policy may fail the task at once: roll_out stops where the episode ends
+    runs = [np.stack(roll_out(env, policy_cls(str(path), env), seed=100001, steps=6)[1])
+            for _ in range(2)]
     env.close()
     np.testing.assert_array_equal(runs[0], runs[1])
     assert runs[0].shape[1] == 14 and np.isfinite(runs[0]).all()

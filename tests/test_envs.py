@@ -8,7 +8,7 @@ from rmbench.experts import make_expert
 from rmbench.sim.station import home_action
 from rmbench.tasks import UnknownTaskError, get_task
 from rmbench.tasks.registry import register
-from tests.conftest import run_expert_steps
+from tests.conftest import roll_out
 
 
 def test_check_env_on_every_registered_id(task_name):
@@ -41,7 +41,7 @@ def test_same_seed_same_episode_bit_for_bit(task_name):
     runs = []
     for _ in range(2):
         env = rmbench.make(task_name, width=128, height=96)
-        runs.append(run_expert_steps(env, make_expert(env), seed=100007, steps=80))
+        runs.append(roll_out(env, make_expert(env), seed=100007, steps=80))
         env.close()
     (obs_a, act_a), (obs_b, act_b) = runs
     assert len(obs_a) == len(obs_b)

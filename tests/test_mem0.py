@@ -18,6 +18,7 @@ from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import Planner, planner_examples, runs
 from rmbench.policies.mem0.train import train_mem0
 from rmbench.training.loop import TrainConfig, TrainingError
+from tests.conftest import roll_out
 
 TINY = Mem0Config(cameras=("head", "left_wrist"), planner_cameras=("head",), image_size=(48, 64),
                   dim=32, encoder_channels=(8, 16, 16), keypoints=4, heads=2, head_layers=1,
@@ -195,17 +196,8 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(mn_dataset, tmp_path,
 # ------------------------------------------------------------------ checkpoints and the loop
 def test_checkpoint_round_trip_gives_identical_actions(mn_ckpt):
     env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
-    runs_ = []
-    for _ in range(2):
-        policy = Mem0Policy(str(mn_ckpt), env)
-        obs, info = env.reset(seed=100001)
-        policy.reset(info["instruction"], {"seed": 100001})
-        acts = []
-        for _ in range(6):
-            a = policy.act(obs)
-            acts.append(a)
-            obs, *_ = env.step(a)
-        runs_.append(np.stack(acts))
+    runs_ = [np.stack(roll_out(env, Mem0Policy(str(mn_ckpt), env), seed=100001, steps=6)[1])
+             for _ in range(2)]
     env.close()
     np.testing.assert_array_equal(runs_[0], runs_[1])
     assert runs_[0].shape == (6, 14) and np.isfinite(runs_[0]).all()
