@@ -70,3 +70,24 @@ def test_no_second_count_without_returning_past_release(button):
     assert b.depth(data) > b.release_depth
     push(button, 20.0, 0.3)
     assert b.count == 1
+
+
+def test_a_shaky_push_counts_once(button):
+    """A finger that bounces on the cap, letting it spring up for a few milliseconds at a
+    time, is one press: the cap must stay up for ``rearm_time`` before a push counts again."""
+    b, _, data, _ = button
+    for _ in range(6):
+        push(button, 20.0, 0.06)
+        push(button, 0.0, 0.05)  # springs past the release depth, but not for long
+    assert b.count == 1
+    push(button, 0.0, b.rearm_time + 0.1)  # let go for good
+    push(button, 20.0, 0.2)
+    assert b.count == 2
+
+
+def test_a_quick_deliberate_double_press_counts_twice(button):
+    b, _, _, _ = button
+    push(button, 20.0, 0.2)
+    push(button, 0.0, b.rearm_time + 0.05)
+    push(button, 20.0, 0.2)
+    assert b.count == 2

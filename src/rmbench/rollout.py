@@ -6,6 +6,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from rmbench.envs.noise import NoiseSpec
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
 from rmbench.video import VideoWriter
@@ -28,12 +29,16 @@ class EpisodeResult:
         return asdict(self)
 
 
-def run_episode(env, expert, seed: int, video: str | Path | None = None) -> EpisodeResult:
-    """One expert episode on ``env`` from ``seed``; optionally a third-person video."""
+def run_episode(env, expert, seed: int, video: str | Path | None = None,
+                noise: NoiseSpec | None = None) -> EpisodeResult:
+    """One expert episode on ``env`` from ``seed``; optionally a third-person video. With
+    ``noise``, the env executes the expert's action plus that noise (the expert is not told)."""
     task = type(env.unwrapped.task)
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
     expert.reset(info["instruction"], info)
+    perturb = (noise.process(seed, 1.0 / env.unwrapped.config.control_hz).perturb
+               if noise is not None and noise.active else None)
     writer = VideoWriter(video) if video else None
     ends: list[tuple[int, str]] = []
     steps, progress, reason, success = 0, 0.0, "timeout", False
@@ -47,6 +52,11 @@ def run_episode(env, expert, seed: int, video: str | Path | None = None) -> Epis
             except Exception as err:  # an expert that cannot plan is a result, not a crash
                 reason = f"expert error: {err}"
                 break
+            if expert.gave_up:
+                reason = f"expert gave up: {expert.gave_up}"
+                break
+            if perturb is not None:
+                action = perturb(action)
             obs, _, terminated, truncated, info = env.step(action)
             steps += 1
             if writer:
@@ -73,8 +83,10 @@ def run_episode(env, expert, seed: int, video: str | Path | None = None) -> Epis
 
 
 def run_expert(task: str, seeds, *, render: bool = False, video_dir: str | Path | None = None,
-               videos: int = 1, on_result=None) -> list[EpisodeResult]:
-    """The expert on ``task`` for each seed; videos of the first ``videos`` seeds."""
+               videos: int = 1, on_result=None, noise: NoiseSpec | None = None
+               ) -> list[EpisodeResult]:
+    """The expert on ``task`` for each seed (under ``noise``, if given); videos of the first
+    ``videos`` seeds."""
     env = make(task, render=render)  # videos use the third-person camera either way
     expert = make_expert(env)
     results = []
@@ -82,7 +94,7 @@ def run_expert(task: str, seeds, *, render: bool = False, video_dir: str | Path 
         for i, seed in enumerate(seeds):
             video = (Path(video_dir) / f"{task}_seed{seed}.mp4"
                      if video_dir is not None and i < videos else None)
-            result = run_episode(env, expert, seed, video)
+            result = run_episode(env, expert, seed, video, noise)
             results.append(result)
             if on_result:
                 on_result(result)

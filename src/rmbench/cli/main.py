@@ -61,6 +61,44 @@ def cmd_expert(args) -> int:
     return 0 if ok == len(results) else 1
 
 
+def cmd_robustness(args) -> int:
+    from rmbench.robustness import sweep
+    from rmbench.tasks import get_task
+
+    task = get_task(args.task).name
+
+    def show(noise, chunk):
+        if not args.json:
+            ok = sum(r.success for r in chunk)
+            print(f"  {noise.kind} {noise.sigma:g}: seeds {chunk[0].seed}-{chunk[-1].seed} "
+                  f"{ok}/{len(chunk)}", flush=True)
+
+    results = sweep(task, args.noise, kind=args.kind, tau=args.tau, episodes=args.episodes,
+                    seed=args.seed, workers=args.workers, on_chunk=show)
+    rows = [r.to_dict() for r in results]
+    if args.json:
+        print(json.dumps({"task": task, "kind": args.kind, "tau": args.tau,
+                          "seed": args.seed, "results": rows}, indent=2))
+        return 0
+    print(f"\n{task}: the expert under {args.kind} noise"
+          + (f" (tau {args.tau:g} s)" if args.kind == "smooth" else ""))
+    for r in rows:
+        fails = "; ".join(f"{reason} ({n})" for reason, n in r["failures"].items())
+        print(f"  sigma {r['sigma']:<6g} {r['successes']:>4}/{r['episodes']}"
+              f"  {100 * r['success_rate']:5.1f}%  {fails}")
+    return 0
+
+
+def _floats(text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers like 0.01,0.02, got {text!r}") from None
+    if not values or any(not (v >= 0) or v == float("inf") for v in values):
+        raise argparse.ArgumentTypeError(f"expected finite numbers >= 0, got {text!r}")
+    return values
+
+
 def cmd_quickstart(args) -> int:
     from rmbench.quickstart import quickstart
 
@@ -84,10 +122,13 @@ def cmd_collect(args) -> int:
 
     width, height = args.resolution
     kwargs = {"cameras": tuple(args.cameras)} if args.cameras else {}
+    from rmbench.envs.noise import NoiseSpec
+
     cfg = CollectConfig(args.task, args.out, episodes=args.episodes, seed=args.seed,
                         width=width, height=height, workers=args.workers, search=args.search,
                         backend=args.backend, overwrite=args.overwrite,
-                        progress=not args.json, **kwargs)
+                        progress=not args.json,
+                        noise=NoiseSpec(args.noise_kind, args.noise, args.noise_tau), **kwargs)
     summary = collect(cfg)
     if args.json:
         print(json.dumps(summary.to_dict(), indent=2))
@@ -165,7 +206,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_train(args) -> int:
-    from rmbench.training.cli import run_training
+    from rmbench.cli.train import run_training
 
     result = run_training(args.policy, args.dataset, args.out, steps=args.steps,
                           batch_size=args.batch_size, device=args.device, seed=args.seed,
@@ -199,6 +240,21 @@ def build_parser() -> argparse.ArgumentParser:
     _add_json(p)
     p.set_defaults(func=cmd_expert)
 
+    p = sub.add_parser("robustness", help="the scripted expert under action noise: success and "
+                       "failure reasons per noise level")
+    p.add_argument("task", help="task name or gym id (see `rmbench tasks`)")
+    p.add_argument("--kind", choices=("white", "smooth", "offset"), default="white",
+                   help="white: a new draw every step; smooth: Ornstein-Uhlenbeck drift with "
+                   "time constant --tau; offset: one draw per episode")
+    p.add_argument("--noise", type=_floats, default=[0.01, 0.02, 0.03], metavar="S1,S2,...",
+                   help="standard deviations in radians on the arm-joint targets")
+    p.add_argument("--tau", type=float, default=0.5, help="smooth noise time constant (s)")
+    p.add_argument("--episodes", type=int, default=100, help="seeds per noise level")
+    p.add_argument("--seed", type=int, default=100000, help="first seed (seeds are consecutive)")
+    p.add_argument("--workers", type=int, default=1)
+    _add_json(p)
+    p.set_defaults(func=cmd_robustness)
+
     p = sub.add_parser("collect", help="record expert demonstrations into a LeRobot v3.0 dataset")
     p.add_argument("task", help="task name or gym id (see `rmbench tasks`)")
     p.add_argument("--episodes", type=int, default=50, help="demonstrations wanted in all")
@@ -215,6 +271,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=["local", "ray"], default="local",
                    help="ray: spread episodes over a Ray cluster (pip install 'rmbench[ray]')")
     p.add_argument("--overwrite", action="store_true", help="delete the dataset in --out first")
+    p.add_argument("--noise", type=float, default=0.0, metavar="SIGMA",
+                   help="DART: execute the expert's action plus noise of this std (radians, arm "
+                   "joints) and record the expert's action (default 0: clean demonstrations)")
+    p.add_argument("--noise-kind", choices=("white", "smooth", "offset"), default="white",
+                   help="see `rmbench robustness --help`")
+    p.add_argument("--noise-tau", type=float, default=0.5, help="smooth noise time constant (s)")
     _add_json(p)
     p.set_defaults(func=cmd_collect)
 

@@ -18,6 +18,7 @@ from tqdm import tqdm
 from rmbench.data import layout as L
 from rmbench.data.record import SEARCH_MODES, EpisodeRecord, Recorder
 from rmbench.data.writer import DatasetWriter
+from rmbench.envs.noise import NoiseSpec
 from rmbench.parallel import BACKENDS, make_executor
 from rmbench.seeds import TRAIN_SEED_END, check_training_seed
 from rmbench.sim.station import StationConfig
@@ -44,6 +45,9 @@ class CollectConfig:
     overwrite: bool = False
     max_attempts: int | None = None  # candidate seeds to try before giving up
     progress: bool = True
+    # Action noise executed on top of the expert's actions (DART); the expert's own actions
+    # are recorded. sigma 0 (the default) records clean demonstrations.
+    noise: NoiseSpec = NoiseSpec()
 
     def __post_init__(self):
         object.__setattr__(self, "task", get_task(self.task).name)
@@ -68,9 +72,12 @@ class CollectConfig:
 
     def identity(self) -> dict:
         """What must match for a re-run to continue an existing dataset."""
-        return {"task": self.task, "seed": self.seed, "cameras": list(self.cameras),
-                "resolution": f"{self.width}x{self.height}", "fps": self.spec.fps,
-                "codec": self.spec.codec.info()}
+        identity = {"task": self.task, "seed": self.seed, "cameras": list(self.cameras),
+                    "resolution": f"{self.width}x{self.height}", "fps": self.spec.fps,
+                    "codec": self.spec.codec.info()}
+        if self.noise.active:  # clean datasets keep the identity they always had
+            identity["action_noise"] = self.noise.to_dict()
+        return identity
 
 
 @dataclass
@@ -92,12 +99,15 @@ class CollectSummary:
 _RECORDER: Recorder | None = None
 
 
-def _record(task: str, spec: L.Spec, mode: str, seed: int) -> EpisodeRecord:
+def _record(task: str, spec: L.Spec, mode: str, seed: int,
+            noise: NoiseSpec | None = None) -> EpisodeRecord:
     global _RECORDER
-    if _RECORDER is None or (_RECORDER.task, _RECORDER.spec, _RECORDER.mode) != (task, spec, mode):
+    key = (task, spec, mode, noise if noise is not None and noise.active else None)
+    if _RECORDER is None or (_RECORDER.task, _RECORDER.spec, _RECORDER.mode,
+                             _RECORDER.noise) != key:
         if _RECORDER is not None:
             _RECORDER.close()
-        _RECORDER = Recorder(task, spec, mode)
+        _RECORDER = Recorder(task, spec, mode, noise)
     return _RECORDER.record(seed)
 
 
@@ -131,7 +141,7 @@ def collect(cfg: CollectConfig) -> CollectSummary:
                 if next_seed >= TRAIN_SEED_END:
                     break
                 pending.append((next_seed, executor.submit(_record, cfg.task, cfg.spec,
-                                                           cfg.search, next_seed)))
+                                                           cfg.search, next_seed, cfg.noise)))
                 next_seed += 1
             if not pending:
                 raise RuntimeError(

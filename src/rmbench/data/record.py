@@ -8,6 +8,11 @@ the expert almost never fails, wasteful when it often does.
 
 Actions are rounded to float32 before they are applied, so the stored actions replayed from
 the stored seed give back the recorded episode exactly.
+
+With action noise (DART, Laskey et al. 2017) the env executes the expert's action plus the
+noise, and the dataset stores the expert's action: what it wanted done in the state the noise
+led to, which is how a policy learns to come back to the demonstrated path. The noise is drawn
+from the episode seed, so a replay re-draws the same executed actions.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from rmbench.data.layout import Spec
+from rmbench.envs.noise import NoiseSpec
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
 from rmbench.video import Mp4Encoder
@@ -40,6 +46,7 @@ class Trajectory:
     state: list[np.ndarray] = field(default_factory=list)
     ee_pose: list[np.ndarray] = field(default_factory=list)
     action: list[np.ndarray] = field(default_factory=list)
+    executed: list[np.ndarray] = field(default_factory=list)  # action + noise, as applied
     subtask: list[int] = field(default_factory=list)
     progress: list[float] = field(default_factory=list)
     success: bool = False
@@ -103,10 +110,12 @@ class ImageStats:
 class Recorder:
     """Records demonstrations of one task in one process; envs are built once and reused."""
 
-    def __init__(self, task: str, spec: Spec, mode: str = "search"):
+    def __init__(self, task: str, spec: Spec, mode: str = "search",
+                 noise: NoiseSpec | None = None):
         if mode not in SEARCH_MODES:
             raise ValueError(f"search mode must be one of {SEARCH_MODES}, got {mode!r}")
         self.task, self.spec, self.mode = task, spec, mode
+        self.noise = noise if noise is not None and noise.active else None
         self._envs: dict[bool, tuple] = {}  # rendering? -> (env, expert)
 
     def _env(self, render: bool):
@@ -125,7 +134,7 @@ class Recorder:
     def record(self, seed: int) -> EpisodeRecord:
         t0 = time.perf_counter()
         if self.mode == "search":
-            traj = run_expert(*self._env(render=False), seed)
+            traj = run_expert(*self._env(render=False), seed, noise=self.noise)
             t1 = time.perf_counter()
             if not traj.success:
                 return EpisodeRecord(self.task, seed, False, traj.reason,
@@ -135,7 +144,7 @@ class Recorder:
         else:
             encoders = {c: Mp4Encoder(self.spec.fps, self.spec.codec) for c in self.spec.cameras}
             stats = {c: ImageStats() for c in self.spec.cameras}
-            traj = run_expert(*self._env(render=True), seed, encoders, stats)
+            traj = run_expert(*self._env(render=True), seed, encoders, stats, self.noise)
             if not traj.success:
                 return EpisodeRecord(self.task, seed, False, traj.reason,
                                      timings={"record_s": time.perf_counter() - t0})
@@ -155,7 +164,7 @@ class Recorder:
         encoders = {c: Mp4Encoder(self.spec.fps, self.spec.codec) for c in self.spec.cameras}
         stats = {c: ImageStats() for c in self.spec.cameras}
         obs, info = env.reset(seed=seed)
-        for t, action in enumerate(traj.action):
+        for t, action in enumerate(traj.executed):
             if not np.array_equal(obs["agent_pos"], traj.state[t]):
                 raise ReplayMismatch(f"{self.task} seed {seed}: replay state differs from the "
                                      f"searched episode at frame {t}")
@@ -169,11 +178,15 @@ class Recorder:
 
 
 def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = None,
-               stats: dict[str, ImageStats] | None = None) -> Trajectory:
-    """One expert episode; frames go to ``encoders`` when the env renders."""
+               stats: dict[str, ImageStats] | None = None,
+               noise: NoiseSpec | None = None) -> Trajectory:
+    """One expert episode; frames go to ``encoders`` when the env renders. With ``noise`` the
+    env executes the expert's action plus the noise; the expert's own action is recorded."""
     sim = env.unwrapped.sim
     obs, info = env.reset(seed=seed)
     expert.reset(info["instruction"], info)
+    perturb = (noise.process(seed, 1.0 / env.unwrapped.config.control_hz).perturb
+               if noise is not None and noise.active else None)
     traj = Trajectory(info["instruction"], info["hidden"])
     progress = info["progress"]
     while True:
@@ -182,16 +195,22 @@ def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = 
         except Exception as err:  # an expert that cannot plan is a skipped seed, not a crash
             traj.reason = f"expert error: {err}"
             return traj
+        if expert.gave_up:
+            traj.reason = f"expert gave up: {expert.gave_up}"
+            return traj
+        executed = (action if perturb is None
+                    else np.asarray(perturb(action), np.float32).astype(np.float64))
         traj.state.append(obs["agent_pos"])
         traj.ee_pose.append(sim.ee_pose())
         traj.action.append(action)
+        traj.executed.append(executed)
         traj.subtask.append(expert.subtask_index)
         traj.progress.append(progress)
         if encoders is not None:
             for cam, enc in encoders.items():
                 enc.add(obs["pixels"][cam])
                 stats[cam].add(obs["pixels"][cam])
-        obs, _, terminated, truncated, info = env.step(action)
+        obs, _, terminated, truncated, info = env.step(executed)
         progress = info.get("progress", progress)
         if terminated or truncated:
             traj.success = bool(info.get("is_success"))

@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from rmbench.experts.ik import ArmIK
-from rmbench.experts.motion import Actions, Motion
+from rmbench.experts.motion import Actions, GaveUp, Handle, Motion
 from rmbench.tasks.base import Task
 
 EXPERTS: dict[str, type[ScriptedExpert]] = {}
@@ -36,28 +36,44 @@ class ScriptedExpert:
         self.subtask = ""
         self.segment_start = False  # this action begins a new labelled segment of the plan
         self.finished = False
+        self.gave_up = ""  # why the expert stopped before the task was done, if it did
 
     def reset(self, instruction: str = "", task_info: dict[str, Any] | None = None) -> None:
         self.motion = Motion(self.ik)
         self._plan = self.plan(self.env.task)
         self._last = self.motion.cmd.copy()
         self.finished = False
+        self.gave_up = ""
 
     def act(self, observation=None) -> np.ndarray:
+        """The next action. Given the observation, the expert closes the loop on its joints:
+        ``motion.observe`` compares them with what it commanded, and the action corrects
+        for the offset the arms hold (servo sag, a drifting perturbation)."""
         if self._plan is None:
             raise RuntimeError("call reset() before act()")
+        if observation is not None and "agent_pos" in observation:
+            self.motion.observe(np.asarray(observation["agent_pos"], float))
         try:
             action, self.subtask_index, self.segment_start = next(self._plan)
             self._last = action
         except StopIteration:
             self.finished = True  # plan done: hold still while the task registers the end
             self.segment_start = False
+        except GaveUp as reason:
+            self.finished = True  # hold still; the caller ends the episode with the reason
+            self.segment_start = False
+            self.gave_up = str(reason)
         self.subtask = type(self.env.task).subtasks[self.subtask_index]
-        return self._last.copy()
+        return self.motion.compensate(self._last)
 
     def plan(self, task: Task) -> Iterator[tuple[np.ndarray, int, bool]]:
         """(action, subtask index, starts a segment) triples; build it from ``label``."""
         raise NotImplementedError
+
+    def handle(self, piece, height: float, **how) -> Handle:
+        """A handle on ``piece`` by its body origin, located live (see ``Motion.carry``)."""
+        data = self.env.task.data
+        return Handle(lambda: (piece.pos(data), piece.yaw(data)), height, **how)
 
     @staticmethod
     def label(subtask: int, actions: Actions) -> Iterator[tuple[np.ndarray, int, bool]]:

@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 from rmbench.experts.base import ScriptedExpert, register_expert
+from rmbench.experts.motion import Handle
 from rmbench.sim.geometry import wrap_angle
 from rmbench.sim.station import TABLE_TOP
-from rmbench.tasks.battery_try import PAIRS, TRIES
+from rmbench.tasks.battery_try import PAIRS, SLOT_TOL, TRIES
 
 OPENING = 0.5  # enough for a 24 mm cell, narrow beside the holder's plates
 AWAY = np.pi / 2  # yaw of a positive end pointing away from the robot
@@ -24,19 +25,29 @@ class BatteryTryExpert(ScriptedExpert):
 
         def move(k, target_yaw, side):
             battery = task.batteries[k]
-            yaw = np.arctan2(*battery.axis(data)[1::-1])
+            slot = task.holder.slot(model, k)
+
+            def locate():
+                # fingers close across the cell: grasp yaws are the axis + 90 deg, mod 180 deg
+                return battery.pos(data), float(np.arctan2(*battery.axis(data)[1::-1])) + np.pi / 2
+
+            def seated():  # in its slot, pointing the way the expert meant
+                axis = battery.axis(data)
+                return bool(np.linalg.norm(battery.pos(data)[:2] - slot) <= SLOT_TOL
+                            and axis[1] * np.sin(target_yaw) > 0.95)
+
             yield from m.clear_for(side)
-            # fingers close across the cell: grasp yaws are the axis + 90 deg, mod 180 deg
-            yield from m.transfer(side, battery.pos(data), yaw + np.pi / 2, 2 * battery.radius,
-                                  (*task.holder.slot(model, k), TABLE_TOP), symmetry=np.pi,
-                                  turn=wrap_angle(target_yaw - yaw), opening=OPENING, hover=HOVER)
+            yield from m.carry(side, Handle(locate, 2 * battery.radius, np.pi, OPENING, HOVER),
+                               (*slot, TABLE_TOP),
+                               turn_to=lambda grip: wrap_angle(target_yaw - (grip - np.pi / 2)),
+                               placed=seated)
 
         # Each arm inserts the battery on its side; the left arm then makes every flip, so the
         # arms trade places once instead of before every try.
         yield from self.label(0, move(0, AWAY, "left"))
         yield from self.label(1, move(1, AWAY, "right"))
         ready = (*task.holder.xy(model), TABLE_TOP + 0.15)
-        for before, after in zip(TRIES, PAIRS, strict=True):
+        for before, after in zip(TRIES, PAIRS, strict=False):
             if task.lamp.state == "green":
                 break
             k = 0 if before[0] != after[0] else 1

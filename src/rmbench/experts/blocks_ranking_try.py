@@ -19,18 +19,18 @@ class BlocksRankingTryExpert(ScriptedExpert):
     task = "blocks_ranking_try"
 
     def plan(self, task):
-        m, data, model = self.motion, task.data, task.model
+        m, model = self.motion, task.model
         slot_of = {c: k for k, c in enumerate(task.initial)}  # colour -> slot, as moved
 
         # One arm does everything: the button is on the left, and a single arm never has to
         # wait for the other to clear the row.
         def move(colour, xy):
             cube = task.cubes[colour]
-            yield from m.transfer("left", cube.pos(data), cube.yaw(data), cube.size,
-                                  (*xy, TABLE_TOP))
+            yield from m.carry("left", self.handle(cube, cube.size), (*xy, TABLE_TOP))
 
         def check():
-            yield from m.press("left", task.button.top(model), approach="left" not in m.away)
+            yield from m.press("left", task.button.top(model), approach="left" not in m.away,
+                               count=lambda: task.button.count)
 
         for pair in (None, *SWAPS):
             if pair is not None:

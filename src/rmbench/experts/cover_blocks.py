@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from rmbench.experts.base import ScriptedExpert, register_expert
-from rmbench.experts.motion import nearer_side
+from rmbench.experts.motion import Handle, nearer_side
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks.cover_blocks import BEHIND, COLOURS
 
@@ -20,11 +20,10 @@ class CoverBlocksExpert(ScriptedExpert):
         cover_on = {}  # block index -> cover index
 
         def carry(cover, xy):
-            knob = cover.knob_centre(data)
-            side = nearer_side(knob)
+            side = nearer_side(cover.knob_centre(data))
             yield from m.clear_for(side)
-            yield from m.transfer(side, knob, cover.yaw(data), cover.knob,
-                                  (*xy, TABLE_TOP + cover.knob_base))
+            handle = Handle(lambda: (cover.knob_centre(data), cover.yaw(data)), cover.knob)
+            yield from m.carry(side, handle, (*xy, TABLE_TOP + cover.knob_base))
 
         for k in range(3):
             cube = task.cubes[k]

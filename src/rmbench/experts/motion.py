@@ -9,7 +9,8 @@ step by step from the previous solution; moves from far away (home) go in joint 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -23,8 +24,42 @@ CARRY_SPEED = 0.30  # m/s
 FINE_SPEED = 0.15  # m/s, last centimetres of descents
 JOINT_SPEED = 1.6  # rad/s, joint-space moves
 CLOSED, OPEN = 0.0, 1.0
+ARM_ENTRIES = np.r_[0:6, 7:13]  # action entries of the arm joints (not the grippers)
+# Joint feedback: the measured joints are compared with the previous command every step and
+# the difference, low-passed with this gain per step, is taken off the next command. A slow
+# error (a drift, an offset, sag under load) is removed within a few steps; the gain is low
+# enough that a step-to-step jitter is not amplified (an EMA of white noise adds
+# GAIN / (2 - GAIN) of its variance).
+FEEDBACK_GAIN = 0.3
+FEEDBACK_LIMIT = 0.15  # rad: never correct more than this per joint
+
+PLACE_TOL = 0.02  # m: a piece set down farther than this from its target is set down again
+ATTEMPTS = 3  # grasps (and set-downs) of one piece before the expert gives up
 
 Actions = Iterator[np.ndarray]
+
+
+class GaveUp(Exception):
+    """The expert cannot finish the episode (a piece out of reach, a grasp that keeps failing):
+    the episode ends as a task failure with this reason. Never a crash."""
+
+
+@dataclass(frozen=True)
+class Handle:
+    """How an expert takes hold of a movable piece, read live from the scene each attempt.
+
+    locate: () -> (grasp centre in world coordinates, the piece's yaw), now.
+    height: the held part's height (the fingers close 1 cm above its bottom).
+    symmetry: the piece looks the same turned by this angle (grasp yaws repeat with it).
+    opening: finger opening to approach with (less inside trays and beside plates).
+    hover: approach and lift height above the grasp point.
+    """
+
+    locate: Callable[[], tuple[np.ndarray, float]]
+    height: float
+    symmetry: float = np.pi / 2
+    opening: float = OPEN
+    hover: float = HOVER
 
 
 def min_jerk(n: int) -> np.ndarray:
@@ -59,6 +94,23 @@ class Motion:
         self.ik = ik
         self.cmd = home_action()
         self.away: set[str] = set()  # arms out of their home pose
+        self.offset = np.zeros(len(ARM_ENTRIES))  # estimated executed-minus-commanded joints
+        self.sent: np.ndarray | None = None  # the last action handed out
+
+    def observe(self, agent_pos: np.ndarray) -> None:
+        """Update the joint-offset estimate from the measured joints (see FEEDBACK_GAIN)."""
+        if self.sent is None:
+            return
+        error = agent_pos[ARM_ENTRIES] - self.sent[ARM_ENTRIES]
+        self.offset += FEEDBACK_GAIN * (error - self.offset)
+        np.clip(self.offset, -FEEDBACK_LIMIT, FEEDBACK_LIMIT, out=self.offset)
+
+    def compensate(self, action: np.ndarray) -> np.ndarray:
+        """``action`` corrected by the estimated joint offset (a new array)."""
+        out = np.array(action, float)
+        out[ARM_ENTRIES] -= self.offset
+        self.sent = out.copy()
+        return out
 
     def clear_for(self, side: str) -> Actions:
         """Send the other arm home first if it is out: the arms never work side by side."""
@@ -125,7 +177,7 @@ class Motion:
         seed = self.joints(side) if side in self.away else None
         q, err = self.ik.solve(side, pos, top_down_quat(yaw), seed=seed)
         if err > 0.005:
-            raise RuntimeError(f"{side} arm cannot reach {np.round(pos, 3)} (IK error {err:.3f} m)")
+            raise GaveUp(f"{side} arm cannot reach {np.round(pos, 3)} (IK error {err:.3f} m)")
         yield from self.move_joints(side, q)
 
     def go_home(self, side: str) -> Actions:
@@ -178,6 +230,35 @@ class Motion:
             yield from self.twist(side, turn)
         yield from self.place(side, dest, yaw + turn, height, opening, hover)
 
+    def carry(self, side: str, handle: Handle, dest, turn_to: Callable[[float], float] | None = None,
+              placed: Callable[[], bool] | None = None) -> Actions:
+        """Pick the piece up and set it down at ``dest`` (table xy and surface z), checking each
+        step against the live scene: a grasp that did not lift the piece is tried again from
+        where the piece now lies, and so is a set-down that missed (``placed``, by default the
+        grasp centre within PLACE_TOL of ``dest`` in xy). ``turn_to`` maps the piece's yaw at
+        the grasp to the turn it needs. Gives up after ATTEMPTS tries."""
+        dest = np.asarray(dest, float)
+        if placed is None:
+            def placed() -> bool:
+                return bool(np.linalg.norm(handle.locate()[0][:2] - dest[:2]) <= PLACE_TOL)
+        for _ in range(ATTEMPTS):
+            pos, piece_yaw = handle.locate()
+            yaw = grasp_yaw(side, pos[:2], piece_yaw, handle.symmetry,
+                            self.gripper_yaw(side) if side in self.away else None)
+            yield from self.grasp(side, pos, yaw, handle.height, handle.opening, handle.hover)
+            if handle.locate()[0][2] < pos[2] + handle.hover / 2:  # it stayed behind
+                yield from self.gripper(side, handle.opening, 4)
+                continue
+            turn = turn_to(piece_yaw) if turn_to is not None else 0.0
+            if abs(turn) > 1e-3:
+                yield from self.twist(side, turn)
+            yield from self.place(side, dest, yaw + turn, handle.height, handle.opening,
+                                  handle.hover)
+            if placed():
+                return
+        raise GaveUp(f"could not move a piece to {np.round(dest[:2], 3).tolist()} in "
+                     f"{ATTEMPTS} attempts")
+
     def twist(self, side: str, angle: float, speed: float = 2 * JOINT_SPEED) -> Actions:
         """Turn the held object about the vertical with the wrist alone (the gripper points
         down, so the wrist-rotate axis is vertical); the other way round if the joint range
@@ -189,9 +270,21 @@ class Motion:
         q[5] = target
         yield from self.move_joints(side, q, speed)
 
-    def press(self, side: str, top, depth: float = 0.012, approach: bool = True) -> Actions:
-        """Push down on the point ``top`` with closed fingers, and come up. ``depth`` is the commanded
-        travel: past the 1 cm end stop, so servo lag still bottoms the button out."""
+    def press(self, side: str, top, depth: float = 0.012, approach: bool = True,
+              count: Callable[[], int] | None = None) -> Actions:
+        """Push down on the point ``top`` with closed fingers, and come up. ``depth`` is the
+        commanded travel: past the 1 cm end stop, so servo lag still bottoms the button out.
+        With ``count`` (the button's press counter), a push that did not register is made
+        again, as a person would who felt no click; the expert gives up after ATTEMPTS."""
+        before = count() if count is not None else 0
+        for attempt in range(ATTEMPTS):
+            yield from self._push(side, top, depth, approach and attempt == 0)
+            if count is None or count() > before:
+                return
+        raise GaveUp(f"{ATTEMPTS} pushes on the button at {np.round(top[:2], 3).tolist()} did "
+                     f"not register")
+
+    def _push(self, side: str, top, depth: float, approach: bool) -> Actions:
         top = np.asarray(top, float)
         yaw = natural_yaw(side, top)
         above = top + (0, 0, FINGER_TIP_BELOW_SITE + 0.04)

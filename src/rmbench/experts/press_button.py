@@ -11,11 +11,17 @@ class PressButtonExpert(ScriptedExpert):
 
     def plan(self, task):
         m, model = self.motion, task.model
+
+        def counter(button):
+            return lambda: button.count
+
         first = True
         for subtask, button, count in ((0, task.left, task.d1), (1, task.middle, task.d2)):
             for _ in range(count):
-                yield from self.label(subtask, m.press("left", button.top(model), approach=first))
+                yield from self.label(subtask, m.press("left", button.top(model), approach=first,
+                                                         count=counter(button)))
                 first = False
         yield from self.label(2, m.go_home("left"))
-        yield from self.label(2, m.press("right", task.confirm.top(model)))
+        yield from self.label(2, m.press("right", task.confirm.top(model),
+                                             count=counter(task.confirm)))
         yield from self.label(2, m.hold(5))

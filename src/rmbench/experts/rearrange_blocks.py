@@ -17,16 +17,16 @@ class RearrangeBlocksExpert(ScriptedExpert):
         returning, middle = task.cubes
 
         def move(cube, dest_xy):
-            pos = cube.pos(data)
-            side = nearer_side(pos)
+            side = nearer_side(cube.pos(data))
             yield from m.clear_for(side)
-            yield from m.transfer(side, pos, cube.yaw(data), cube.size, (*dest_xy, TABLE_TOP))
+            yield from m.carry(side, self.handle(cube, cube.size), (*dest_xy, TABLE_TOP))
 
         # Retreats belong to the subtask they make room for; each is its own segment, so the
         # next segment starts with the arms at home.
         yield from self.label(0, move(middle, task.mat_slot(task.empty)))
         yield from self.label(1, m.retreat())
-        yield from self.label(1, m.press("left", task.button.top(task.model)))
+        yield from self.label(1, m.press("left", task.button.top(task.model),
+                                             count=lambda: task.button.count))
         yield from self.label(2, m.go_home("left"))
         yield from self.label(2, move(returning, task.slots[1]))
         yield from self.label(2, m.hold(5))

@@ -21,10 +21,9 @@ class SwapBlocksExpert(ScriptedExpert):
         first, second = roles(task.empty)
 
         def move(cube, tray):
-            pos = cube.pos(data)
-            side = nearer_side(pos)
-            yield from m.transfer(side, pos, cube.yaw(data), cube.size,
-                                  (*task.trays[tray].xy(model), TABLE_TOP), opening=TRAY_OPENING)
+            side = nearer_side(cube.pos(data))
+            yield from m.carry(side, self.handle(cube, cube.size, opening=TRAY_OPENING),
+                               (*task.trays[tray].xy(model), TABLE_TOP))
 
         # Each retreat is labelled with the subtask it makes room for and is its own segment,
         # so every move starts with both arms at home, as at the start of an episode.
@@ -34,5 +33,5 @@ class SwapBlocksExpert(ScriptedExpert):
             yield from self.label(k + 1, m.retreat())
         top = task.button.top(model)
         side = nearer_side(top)
-        yield from self.label(3, m.press(side, top))
+        yield from self.label(3, m.press(side, top, count=lambda: task.button.count))
         yield from self.label(3, m.go_home(side))

@@ -146,8 +146,10 @@ class Button(StaticPiece):
     """A spring-loaded push button with press counting.
 
     The cap slides down along z against a preloaded spring (joint stiffness with springref
-    above the upper limit). A press counts once per push: the cap must travel past
-    ``press_depth`` and come back above ``release_depth`` before it can count again.
+    above the upper limit). A press counts once per push, the way a person counts them: the
+    cap must travel past ``press_depth`` (the click), then come back above ``release_depth``
+    and stay there for ``rearm_time`` seconds before a push can count again. A finger that
+    shakes on the cap, or lifts off and lands again within that time, makes one press.
     """
 
     cap_rgba: tuple = (0.9, 0.15, 0.15, 1.0)
@@ -155,10 +157,12 @@ class Button(StaticPiece):
     travel: float = 0.01
     press_depth: float = 0.006
     release_depth: float = 0.003
+    rearm_time: float = 0.15  # s; a deliberate second push takes longer than this to come
     base_height: float = 0.02
     cap_height: float = 0.015
     count: int = 0
     armed: bool = True
+    released_at: float | None = None  # when the cap last came back above release_depth
     qpos_adr: int = -1
     just_pressed: bool = False
 
@@ -187,6 +191,7 @@ class Button(StaticPiece):
     def reset(self) -> None:
         self.count = 0
         self.armed = True
+        self.released_at = None
         self.just_pressed = False
 
     def depth(self, data: mujoco.MjData) -> float:
@@ -204,8 +209,14 @@ class Button(StaticPiece):
             self.count += 1
             self.armed = False
             self.just_pressed = True
-        elif not self.armed and d <= self.release_depth:
-            self.armed = True
+        elif not self.armed:
+            if d > self.release_depth:
+                self.released_at = None
+            elif self.released_at is None:
+                self.released_at = data.time
+            elif data.time - self.released_at >= self.rearm_time:
+                self.armed = True
+                self.released_at = None
 
 
 # Seven-segment layout: segment -> (centre x, centre y, horizontal?) in units of the digit
