@@ -72,6 +72,9 @@ class Simulator:
         self.grasp_sites = np.array([m.site(f"{side}/grasp").id for side in robot.SIDES])
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._target = np.zeros(m.nu)
+        # Per physics step, the setpoint moves this fraction of the way to the reference.
+        self._servo_gain = (1.0 if config.servo_tau == 0
+                            else float(-np.expm1(-config.timestep / config.servo_tau)))
 
     # ------------------------------------------------------------------ state
     def reset_robot(self, action: np.ndarray | None = None) -> None:
@@ -122,12 +125,14 @@ class Simulator:
         return clipped, int(np.count_nonzero(clipped != action))
 
     def step(self, action: np.ndarray, on_substep=None) -> None:
-        """Run one control period towards ``action`` (already validated and clipped)."""
+        """Run one control period towards ``action`` (already validated and clipped): the
+        reference moves linearly from the previous target to the new one, and the servo
+        setpoints (``data.ctrl``) follow it with the first-order lag ``servo_tau``."""
         start = self._target
         goal = self.action_to_ctrl(action)
-        n = self.config.substeps
+        n, gain, ctrl = self.config.substeps, self._servo_gain, self.data.ctrl
         for i in range(1, n + 1):
-            self.data.ctrl[:] = start + (goal - start) * (i / n)
+            ctrl += gain * (start + (goal - start) * (i / n) - ctrl)
             mujoco.mj_step(self.model, self.data)
             if on_substep is not None:
                 on_substep()

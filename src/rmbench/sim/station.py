@@ -48,6 +48,10 @@ class StationConfig:
     control_hz: policy/control rate; one env step is one control period.
     timestep: physics step in seconds.
     render: False runs physics only (observations carry no pixels).
+    servo_tau: time constant (s) of the servos' response to a new target. Real joint servos
+        (the ViperX's Dynamixels) move to a new goal through a velocity/acceleration profile,
+        not at once; modelled as a first-order lag of the setpoint. Without it a jumpy target
+        shook the arms hard enough to throw a held battery or cover out of the fingers.
     """
 
     cameras: tuple[str, ...] = DEFAULT_CAMERAS
@@ -56,6 +60,7 @@ class StationConfig:
     control_hz: float = 20.0
     timestep: float = 0.002
     render: bool = True
+    servo_tau: float = 0.05
     video_size: tuple[int, int] = field(default=(480, 360))
 
     def __post_init__(self):
@@ -69,6 +74,8 @@ class StationConfig:
             raise ValueError(f"resolution {self.width}x{self.height} outside 16..4096")
         if self.control_hz <= 0 or self.timestep <= 0:
             raise ValueError("control_hz and timestep must be positive")
+        if not self.servo_tau >= 0:
+            raise ValueError(f"servo_tau must be >= 0, got {self.servo_tau}")
         n = round(1.0 / (self.control_hz * self.timestep))
         if n < 1 or abs(n * self.timestep * self.control_hz - 1.0) > 1e-6:
             raise ValueError(
