@@ -129,3 +129,37 @@ def test_registry_refuses_duplicates():
 def test_bad_camera_config_is_a_clear_error():
     with pytest.raises(ValueError, match="unknown camera"):
         rmbench.make("put_back_block", cameras=("head", "ceiling"))
+
+
+@pytest.mark.parametrize("obs_type", ["environment_state_agent_pos",
+                                      "pixels_environment_state_agent_pos"])
+def test_check_env_with_the_state_observation(task_name, obs_type):
+    env = gym.make(get_task(task_name).gym_id, width=96, height=72, obs_type=obs_type)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+def test_obs_types():
+    n = len(get_task("put_back_block").state_names)
+    state = rmbench.make("put_back_block", obs_type="environment_state_agent_pos")
+    obs, _ = state.reset(seed=3)
+    assert set(obs) == {"agent_pos", "environment_state"}
+    assert obs["environment_state"].shape == (n,) and obs["environment_state"].dtype == np.float64
+    assert not state.unwrapped.config.render  # no pixels asked for: the cameras stay off
+    both = rmbench.make("put_back_block", obs_type="pixels_environment_state_agent_pos",
+                        width=64, height=48)
+    obs_both, _ = both.reset(seed=3)
+    assert set(obs_both) == {"agent_pos", "environment_state", "pixels"}
+    assert np.array_equal(obs_both["environment_state"], obs["environment_state"])
+    default = rmbench.make("put_back_block", width=64, height=48)  # today's observation
+    obs_default, _ = default.reset(seed=3)
+    assert set(obs_default) == {"agent_pos", "pixels"}
+    assert set(default.observation_space.spaces) == {"agent_pos", "pixels"}
+    for a, b in zip(obs_both["pixels"].values(), obs_default["pixels"].values(), strict=True):
+        assert np.array_equal(a, b)
+    action = obs["agent_pos"]
+    for env in (state, both, default):
+        env.step(action)
+        env.close()
+    with pytest.raises(ValueError, match="obs_type must be one of .*environment_state_agent_pos"):
+        rmbench.make("put_back_block", obs_type="state")

@@ -4,7 +4,10 @@ Every task names two moments (``Task.aliasing_pair``): each is a set of fixed hi
 variables, a stage of the plan, and which expert segment start after reaching that stage.
 Run from the same seed, the two moments should look alike to the head camera while the
 expert's next subtask (or, where the text is the same, its next actions) differ. The pixel
-distance is compared with the same moment in an unrelated seed.
+distance is compared with the same moment in an unrelated seed. The distance between the two
+moments' state observations (``Task.environment_state``) is compared with the distance between
+the first frames of the two seeds: a state policy meets the same aliasing as a pixel policy,
+or the state vector leaks what memory should carry.
 """
 
 from __future__ import annotations
@@ -16,14 +19,17 @@ import numpy as np
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
 from rmbench.tasks import get_task
+from rmbench.tasks.state import is_continuous, symmetric_heading
 
 
 @dataclass
 class Moment:
-    frame: np.ndarray  # head camera, HxWx3 uint8
+    frame: np.ndarray | None  # head camera, HxWx3 uint8 (None when not rendered)
     step: int
     next_subtask: str
     actions: np.ndarray  # the expert's actions from the moment to the end of the episode
+    state: np.ndarray | None = None  # the task's environment_state() at the moment
+    first_state: np.ndarray | None = None  # ... and at the episode's first frame
 
 
 @dataclass
@@ -37,42 +43,62 @@ class AliasingResult:
     next_subtasks: tuple[str, str]
     action_divergence: float  # max |difference| of the expert's actions from there on (rad)
     steps: tuple[int, int]
+    # The state observation (Euclidean distances between environment_state vectors): the
+    # pair's, and the mean between the first frames of ``seed`` and of UNRELATED_FIRST_FRAMES
+    # seeds after ``unrelated_seed`` (how far apart two layouts are; the same moment in
+    # another layout of an M(n) task can look as alike as the pair does).
+    state_distance: float = float("nan")
+    unrelated_state_distance: float = float("nan")
+    state_ratio: float = float("nan")
+    # The same ratio without the headings of symmetric pieces (cubes, covers, cells' axes): a
+    # carried cube keeps its yaw from reset, so where the pair's moments have cubes in each
+    # other's places (swap_blocks, blocks_ranking_try) their headings are traded too, in the
+    # frames as in the vectors, and no frame tells a traded yaw from a drawn one.
+    state_ratio_core: float = float("nan")
+    state_entry: str = ""  # the entry that differs most between the two moments
+    state_discrete_differ: tuple[str, ...] = ()  # flags, one-hots, colours, digits that differ
+    state_position_jitter: float = float("nan")  # max |difference| of x, y, z entries (m)
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
 def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
-            width: int = 320, height: int = 240) -> Moment:
+            width: int = 320, height: int = 240, render: bool = True) -> Moment:
     """Roll the expert from ``seed`` with ``hidden`` fixed until its ``segment``-th segment
-    start after the env reached ``stage``; return the head frame there and what follows."""
+    start after the env reached ``stage``; return the head frame (``render``) and the state
+    observation there, and what follows."""
     env = make(task, render=False)
     try:
         expert = make_expert(env)
         obs, info = env.reset(seed=seed, options={"hidden": hidden})
         expert.reset(info["instruction"], info)
+        first_state = env.unwrapped.task.environment_state()
         plan = info["plan"]
         reached, seen, frame, step = info["subtask_step"] >= stage, 0, None, 0
+        state, found = None, False
         actions: list[np.ndarray] = []
         for t in range(env.unwrapped.step_limit):
             action = expert.act(obs)
-            if frame is None and reached and expert.segment_start:
+            if not found and reached and expert.segment_start:
                 seen += 1
                 if seen == segment:
-                    frame = env.unwrapped.sim.render(["head"], width, height)["head"]
-                    step = t
-            if frame is not None:
+                    found, step = True, t
+                    state = env.unwrapped.task.environment_state()
+                    if render:
+                        frame = env.unwrapped.sim.render(["head"], width, height)["head"]
+            if found:
                 actions.append(action)
             obs, _, terminated, truncated, info = env.step(action)
             reached = reached or info["subtask_step"] >= stage
             if terminated or truncated:
                 break
-        if frame is None:
+        if not found:
             raise RuntimeError(f"{task} seed {seed}: the expert never reached stage {stage} "
                                f"segment {segment} with {hidden}")
         subtasks = get_task(task).subtasks
         return Moment(frame, step, subtasks[plan[stage]] if stage < len(plan) else "done",
-                      np.array(actions))
+                      np.array(actions), state, first_state)
     finally:
         env.close()
 
@@ -81,15 +107,53 @@ def pixel_distance(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.abs(a.astype(np.int16) - b.astype(np.int16)).mean())
 
 
-def measure(task: str, seed: int = 100000, unrelated_seed: int | None = None) -> AliasingResult:
+def state_distance(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.linalg.norm(a - b))
+
+
+UNRELATED_FIRST_FRAMES = 8
+
+
+def first_states(task: str, seeds) -> np.ndarray:
+    """The state observation at reset for each seed (physics only; hidden variables drawn)."""
+    env = make(task, obs_type="environment_state_agent_pos")
+    try:
+        return np.stack([env.reset(seed=int(s))[0]["environment_state"] for s in seeds])
+    finally:
+        env.close()
+
+
+def measure(task: str, seed: int = 100000, unrelated_seed: int | None = None,
+            pixels: bool = True) -> AliasingResult:
+    """The aliasing pair of ``task`` from ``seed`` against the first moment in
+    ``unrelated_seed``; ``pixels=False`` skips rendering (the pixel fields are then NaN)."""
     cls = get_task(task)
     unrelated_seed = seed + 1 if unrelated_seed is None else unrelated_seed
-    a, b = (capture(cls.name, seed, *m) for m in cls.aliasing_pair)
-    other = capture(cls.name, unrelated_seed, *cls.aliasing_pair[0])
-    d, d_other = pixel_distance(a.frame, b.frame), pixel_distance(a.frame, other.frame)
+    a, b = (capture(cls.name, seed, *m, render=pixels) for m in cls.aliasing_pair)
+    other = capture(cls.name, unrelated_seed, *cls.aliasing_pair[0], render=pixels)
+    if pixels:
+        d, d_other = pixel_distance(a.frame, b.frame), pixel_distance(a.frame, other.frame)
+    else:
+        d = d_other = float("nan")
+    names = cls.state_names
+    firsts = first_states(cls.name, [seed, *range(unrelated_seed,
+                                                  unrelated_seed + UNRELATED_FIRST_FRAMES)])
+    core = np.array([not symmetric_heading(n) for n in names])
+    ratios = []
+    for keep in (np.ones(len(names), bool), core):
+        pair = state_distance(a.state[keep], b.state[keep])
+        apart = float(np.mean([state_distance(firsts[0][keep], f[keep]) for f in firsts[1:]]))
+        ratios.append((pair, apart, pair / max(apart, 1e-9)))
+    gap = np.abs(a.state - b.state)
+    worst = names[int(np.argmax(gap))]
+    discrete = tuple(n for n, g in zip(names, gap, strict=True) if g > 0 and not is_continuous(n))
+    jitter = max((g for n, g in zip(names, gap, strict=True) if n.endswith(("_x", "_y", "_z"))),
+                 default=0.0)
     n = max(len(a.actions), len(b.actions))  # a finished episode holds its last action
     pad = [np.concatenate([m.actions, np.repeat(m.actions[-1:], n - len(m.actions), 0)])
            for m in (a, b)]
     return AliasingResult(cls.name, seed, unrelated_seed, round(d, 3), round(d_other, 3),
                           round(d / max(d_other, 1e-9), 3), (a.next_subtask, b.next_subtask),
-                          round(float(np.abs(pad[0] - pad[1]).max()), 3), (a.step, b.step))
+                          round(float(np.abs(pad[0] - pad[1]).max()), 3), (a.step, b.step),
+                          *(round(v, 4) for v in ratios[0]), round(ratios[1][2], 4), worst,
+                          discrete, round(float(jitter), 4))

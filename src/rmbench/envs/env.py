@@ -2,7 +2,10 @@
 
 Observation (gym-aloha / LeRobot layout): ``pixels`` (camera -> HxWx3 uint8) and
 ``agent_pos`` (14,) = 6 left joints, left gripper opening in [0, 1], 6 right joints, right
-gripper. Action: the same 14-vector of absolute targets, applied at 20 Hz.
+gripper. ``obs_type`` picks it (the names gym-pusht uses): ``pixels_agent_pos`` (the default),
+``environment_state_agent_pos`` (``environment_state``: the task's vector of what the head
+camera shows, ``Task.state_names``; no rendering) or ``pixels_environment_state_agent_pos``
+(both). Action: the same 14-vector of absolute targets, applied at 20 Hz.
 
 Reward: the increase of the task's progress this step, so an episode's return equals the
 best progress reached (1.0 on success). Termination on success, task failure or a physics
@@ -22,9 +25,12 @@ from rmbench.sim.simulator import ACTION_DIM, Simulator
 from rmbench.sim.station import SimulationError, StationConfig, base_spec
 from rmbench.tasks import get_task
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.state import bounds as state_bounds
 
 log = logging.getLogger(__name__)
 SETTLE_STEPS = 50  # physics steps (0.1 s) after placing objects, before the first frame
+OBS_TYPES = ("pixels_agent_pos", "environment_state_agent_pos",
+             "pixels_environment_state_agent_pos")
 
 
 class RMBenchEnv(gym.Env):
@@ -32,9 +38,16 @@ class RMBenchEnv(gym.Env):
 
     def __init__(self, task: str | type[Task] = "put_back_block", *,
                  cameras: tuple[str, ...] | list[str] | None = None, width: int = 320,
-                 height: int = 240, render: bool = True, instructions: str = "seen",
-                 render_mode: str | None = "rgb_array", step_limit: int | None = None):
+                 height: int = 240, render: bool | None = None, instructions: str = "seen",
+                 render_mode: str | None = "rgb_array", step_limit: int | None = None,
+                 obs_type: str = "pixels_agent_pos"):
         task_cls = get_task(task) if isinstance(task, str) else task
+        if obs_type not in OBS_TYPES:
+            raise ValueError(f"obs_type must be one of {list(OBS_TYPES)}, got {obs_type!r}")
+        self.obs_type = obs_type
+        self.with_state = "environment_state" in obs_type
+        if render is None:  # cameras on exactly when the observation holds pixels
+            render = obs_type.startswith("pixels")
         if instructions not in ("seen", "unseen"):
             raise ValueError(f"instructions must be 'seen' or 'unseen', got {instructions!r}")
         if render_mode not in (None, "rgb_array"):
@@ -55,10 +68,13 @@ class RMBenchEnv(gym.Env):
         agent_pos = gym.spaces.Box(self.sim.action_low - margin, self.sim.action_high + margin,
                                    (ACTION_DIM,), np.float64)
         spaces: dict[str, gym.Space] = {"agent_pos": agent_pos}
-        if render:
+        if render and obs_type.startswith("pixels"):
             spaces["pixels"] = gym.spaces.Dict({
                 cam: gym.spaces.Box(0, 255, (height, width, 3), np.uint8)
                 for cam in self.config.cameras})
+        if self.with_state:
+            low, high = state_bounds(task_cls.state_names)
+            spaces["environment_state"] = gym.spaces.Box(low, high, dtype=np.float64)
         self.observation_space = gym.spaces.Dict(spaces)
         self.action_space = gym.spaces.Box(self.sim.action_low.astype(np.float32),
                                            self.sim.action_high.astype(np.float32),
@@ -156,7 +172,11 @@ class RMBenchEnv(gym.Env):
         if safe:
             pos = np.nan_to_num(pos, nan=0.0, posinf=0.0, neginf=0.0)
         obs: dict[str, Any] = {"agent_pos": pos}
-        if self.config.render:
+        if self.with_state:
+            state = self.task.environment_state()
+            obs["environment_state"] = (np.nan_to_num(state, nan=0.0, posinf=0.0, neginf=0.0)
+                                        if safe else state)
+        if self.config.render and self.obs_type.startswith("pixels"):
             if safe:
                 obs["pixels"] = {c: np.zeros((self.config.height, self.config.width, 3), np.uint8)
                                  for c in self.config.cameras}

@@ -56,6 +56,9 @@ class Task:
     # Two moments that look alike but need different actions, each (hidden values, stage,
     # n): the n-th expert segment start after the env reached that stage (rmbench.aliasing).
     aliasing_pair: ClassVar[tuple[tuple[dict, int, int], tuple[dict, int, int]]]
+    # The state observation: names of ``environment_state()``'s entries, in order (see
+    # rmbench.tasks.state for the shared encodings and docs/state_observation.md).
+    state_names: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self):
         self.model: mujoco.MjModel | None = None
@@ -98,6 +101,13 @@ class Task:
     def hidden_state(self) -> dict[str, Any]:
         """The episode's hidden variables (what memory must recover), JSON-serialisable."""
         return {}
+
+    def environment_state(self) -> np.ndarray:
+        """What the head camera shows of the scene now, as a float64 vector in the order of
+        ``state_names``: poses of objects and fixtures, visible fixture states (a button's
+        depth, a lamp's colour, a tile's digit). Never a hidden variable, a counter, the
+        subtask, or anything a screen, cover or holder hides at this moment."""
+        raise NotImplementedError
 
     # -- shared helpers -----------------------------------------------------------------
     def set_overrides(self, hidden: dict[str, Any] | None) -> None:

@@ -28,6 +28,7 @@ import numpy as np
 from rmbench.sim.fixtures import BatteryHolder, Lamp
 from rmbench.sim.objects import Battery
 from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 
@@ -35,6 +36,7 @@ PAIRS = ((1, 0), (1, 1), (0, 1))  # candidates for the hidden pair, also the ord
 TRIES = ((0, 0), *PAIRS)
 SLOT_TOL = 0.01
 SIDE_OFFSET = 0.17
+ENDS_HIDDEN_DX = 0.02  # a cell this close (across the slot) lies between the slot's plates
 
 
 def flips(correct: tuple[int, int]) -> list[int]:
@@ -72,6 +74,14 @@ class BatteryTry(Task):
     hidden_keys = ("correct",)
     aliasing_pair = (({"correct": (1, 1)}, 3, 2), ({"correct": (0, 1)}, 4, 2))
 
+    # The state observation: the holder, the lamp, and the two identical cells left to right.
+    # A cell's axis shows as cos/sin(2 yaw) (no polarity); which way its positive end points
+    # (cos/sin of yaw) only while the end can be seen, zero once the slot's plates hide it.
+    state_names = (*S.xy_names("holder"), *S.lamp_names("lamp"),
+                   *(n for p in ("left", "right") for n in (
+                       *S.pose_names(f"battery_{p}", 2), f"battery_{p}_ends_visible",
+                       f"battery_{p}_plus_cos_yaw", f"battery_{p}_plus_sin_yaw")))
+
     def __init__(self):
         super().__init__()
         self.holder = BatteryHolder("holder")
@@ -101,6 +111,23 @@ class BatteryTry(Task):
 
     def plan(self) -> list[int]:
         return [0, 1, *(2 + k for k in flips(self.correct))]
+
+    def ends_hidden(self, battery: Battery) -> bool:
+        """Whether the head camera cannot tell the cell's ends apart: it lies in a slot, below
+        the top of the contact plates at its ends."""
+        p, h = battery.pos(self.data), self.holder
+        for k in (0, 1):
+            dx, dy = np.abs(p[:2] - h.slot(self.model, k))
+            if dx <= ENDS_HIDDEN_DX and dy <= h.slot_length / 2 and p[2] - TABLE_TOP < h.plate[2]:
+                return True
+        return False
+
+    def environment_state(self) -> np.ndarray:
+        d, parts = self.data, [S.xy(self.holder, self.model), S.lamp(self.lamp)]
+        for b in S.left_to_right(self.batteries, d):
+            visible = 0.0 if self.ends_hidden(b) else 1.0
+            parts += [S.pose(b, d, 2), [visible], visible * S.heading(b.yaw(d), 1)]
+        return S.assemble(self.state_names, parts)
 
     def hidden_state(self) -> dict:
         return {"correct": list(self.correct)}

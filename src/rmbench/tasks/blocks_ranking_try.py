@@ -31,6 +31,7 @@ import numpy as np
 from rmbench.sim.fixtures import Button, Lamp
 from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 
@@ -87,6 +88,12 @@ class BlocksRankingTry(Task):
     aliasing_pair = (({"initial_order": (0, 1, 2), "target_order": (2, 1, 0)}, 3, 1),
                      ({"initial_order": (0, 2, 1), "target_order": (2, 1, 0)}, 1, 1))
 
+    # The state observation: the three cubes left to right, each with its colour (RGB), the
+    # button and the lamp. The target order and the tries made are not in it.
+    state_names = (*(n for p in ("left", "middle", "right") for n in (
+                       *S.pose_names(f"cube_{p}", S.CUBE_SYMMETRY), *S.rgb_names(f"cube_{p}"))),
+                   *S.button_names("button"), *S.lamp_names("lamp"))
+
     def __init__(self):
         super().__init__()
         self.cubes = tuple(Cube(f"cube{k}", size=0.04) for k in range(3))
@@ -136,6 +143,13 @@ class BlocksRankingTry(Task):
         for pair in SWAPS[: len(self.orders) - 1]:
             out += [SWAP_SUBTASK[pair], CHECK]
         return out
+
+    def environment_state(self) -> np.ndarray:
+        m, d = self.model, self.data
+        return S.assemble(self.state_names, [
+            *((S.pose(c, d, S.CUBE_SYMMETRY), m.geom_rgba[c.geom_id][:3])
+              for c in S.left_to_right(self.cubes, d)),
+            S.button(self.button, m, d), S.lamp(self.lamp)])
 
     def hidden_state(self) -> dict:
         return {"target_order": list(self.target), "initial_order": list(self.initial),

@@ -27,6 +27,7 @@ import numpy as np
 
 from rmbench.sim.objects import Cover, Cube
 from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 
@@ -37,6 +38,10 @@ SPACING = 0.2
 BEHIND = 0.13
 COVERED_TOL = 0.02
 PROGRESS = (0.0, 0.05, 0.1, 0.15, 0.3, 0.6, 1.0)
+# A cover this close (xy) over a cube, its rim lower than the cube's top, hides the cube from
+# the head camera (its segmentation shows no cube pixel once the rim is 3 cm up).
+HIDDEN_XY = 0.02
+HIDDEN_RIM = 0.04
 
 
 @register
@@ -68,6 +73,15 @@ class CoverBlocks(Task):
     hidden_keys = ("colours",)
     aliasing_pair = (({"colours": ("red", "green", "blue")}, 3, 1),
                      ({"colours": ("blue", "red", "green")}, 3, 1))
+
+    # The state observation: the three cubes left to right, each with a visibility flag and,
+    # while it can be seen, its pose and colour (zero under a cover); the three identical
+    # covers left to right.
+    state_names = (*(n for p in ("left", "middle", "right") for n in (
+                       f"cube_{p}_visible", *S.pose_names(f"cube_{p}", S.CUBE_SYMMETRY),
+                       *S.one_hot_names(f"cube_{p}", COLOURS))),
+                   *(n for p in ("left", "middle", "right")
+                     for n in S.pose_names(f"cover_{p}", S.COVER_SYMMETRY)))
 
     def __init__(self):
         super().__init__()
@@ -111,6 +125,23 @@ class CoverBlocks(Task):
 
     def plan(self) -> list[int]:
         return [0, 1, 2, 3, 4, 5]
+
+    def hidden_by_cover(self, cube: Cube) -> bool:
+        """Whether a cover hides the cube from the head camera: one stands over it, its rim
+        lower than the cube's top."""
+        xy = cube.pos(self.data)[:2]
+        return any(np.linalg.norm(c.pos(self.data)[:2] - xy) <= HIDDEN_XY
+                   and c.pos(self.data)[2] - TABLE_TOP < HIDDEN_RIM for c in self.covers)
+
+    def environment_state(self) -> np.ndarray:
+        d, parts = self.data, []
+        for cube in S.left_to_right(self.cubes, d):
+            visible = 0.0 if self.hidden_by_cover(cube) else 1.0
+            colour = self.colours[self.cubes.index(cube)]
+            parts += [[visible], visible * S.pose(cube, d, S.CUBE_SYMMETRY),
+                      visible * S.one_hot(colour, list(COLOURS))]
+        parts += [S.pose(c, d, S.COVER_SYMMETRY) for c in S.left_to_right(self.covers, d)]
+        return S.assemble(self.state_names, parts)
 
     def hidden_state(self) -> dict:
         return {"colours": list(self.colours)}

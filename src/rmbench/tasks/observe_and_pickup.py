@@ -32,6 +32,7 @@ import numpy as np
 from rmbench.sim.fixtures import Wall
 from rmbench.sim.objects import SHAPE_COLOURS, SHAPES, Shape, footprint
 from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 
@@ -67,6 +68,15 @@ class ObserveAndPickup(Task):
     aliasing_stage = 1
     hidden_keys = ("target",)
     aliasing_pair = (({"target": 0}, 1, 1), ({"target": 3}, 1, 1))
+
+    # The state observation: each table object's pose and look (shape, colour), and the
+    # reference's look while it can be seen (zero once the screen stands in front of it).
+    state_names = (
+        *(n for k in range(N_OBJECTS) for n in (
+            *S.pose_names(f"object{k}", "k"), *S.one_hot_names(f"object{k}_shape", SHAPES),
+            *S.one_hot_names(f"object{k}_colour", SHAPE_COLOURS))),
+        "reference_visible", *S.one_hot_names("reference_shape", SHAPES),
+        *S.one_hot_names("reference_colour", SHAPE_COLOURS))
 
     def __init__(self):
         super().__init__()
@@ -137,6 +147,17 @@ class ObserveAndPickup(Task):
 
     def plan(self) -> list[int]:
         return [0, 1]
+
+    def environment_state(self) -> np.ndarray:
+        d, shapes, colours = self.data, list(SHAPES), list(SHAPE_COLOURS)
+        # The screen as the cameras draw it: it stands once its body has come up from under
+        # the floor (a step after ``screen_up`` when it rises on the period's last substep).
+        visible = 0.0 if d.xpos[self.screen.body_id][2] > 0 else 1.0
+        return S.assemble(self.state_names, [
+            *((S.pose(o, d, S.SHAPE_SYMMETRY[o.shape]), S.one_hot(o.shape, shapes),
+               S.one_hot(o.colour, colours)) for o in self.objects),
+            [visible], visible * S.one_hot(self.reference.shape, shapes),
+            visible * S.one_hot(self.reference.colour, colours)])
 
     def hidden_state(self) -> dict:
         t = self.objects[self.target]

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from rmbench.sim.fixtures import Button, NumberTile
+from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 
@@ -54,6 +55,12 @@ class PressButton(Task):
     aliasing_stage = 1  # after the first press
     hidden_keys = ("d1", "d2")
     aliasing_pair = (({"d1": 3, "d2": 2}, 2, 1), ({"d1": 3, "d2": 2}, 3, 1))
+
+    # The state observation: the three buttons (left, middle, confirm) and the two tiles with
+    # the digit each shows. Press counts are not in it: a released button shows none.
+    state_names = (*S.button_names("button_left"), *S.button_names("button_middle"),
+                   *S.button_names("button_confirm"), *S.xy_names("tile_left"), "tile_left_digit",
+                   *S.xy_names("tile_middle"), "tile_middle_digit")
 
     def __init__(self):
         super().__init__()
@@ -92,6 +99,12 @@ class PressButton(Task):
 
     def plan(self) -> list[int]:
         return [0] * self.d1 + [1] * self.d2 + [2]
+
+    def environment_state(self) -> np.ndarray:
+        m, d = self.model, self.data
+        return S.assemble(self.state_names, [
+            *(S.button(b, m, d) for b in self.buttons.values()),
+            *((S.xy(t, m), [t.digit]) for t in self.tiles)])
 
     def hidden_state(self) -> dict:
         return {"d1": self.d1, "d2": self.d2}

@@ -24,6 +24,7 @@ import numpy as np
 from rmbench.sim.fixtures import Button, Mat
 from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 
@@ -56,6 +57,10 @@ class PutBackBlock(Task):
     hidden_keys = ("original_mat",)
     aliasing_pair = (({"original_mat": "left"}, 2, 1), ({"original_mat": "front"}, 2, 1))
 
+    # The state observation (docs/state_observation.md): the four mats, the button, the cube.
+    state_names = (*(n for m in MAT_NAMES for n in S.xy_names(f"mat_{m}")),
+                   *S.button_names("button"), *S.pose_names("cube", S.CUBE_SYMMETRY))
+
     def __init__(self):
         super().__init__()
         self.cube = Cube("cube", size=0.04)
@@ -86,6 +91,12 @@ class PutBackBlock(Task):
 
     def plan(self) -> list[int]:
         return [0, 1, 2]
+
+    def environment_state(self) -> np.ndarray:
+        m, d = self.model, self.data
+        return S.assemble(self.state_names, [*(S.xy(self.mats[n], m) for n in MAT_NAMES),
+                                             S.button(self.button, m, d),
+                                             S.pose(self.cube, d, S.CUBE_SYMMETRY)])
 
     def hidden_state(self) -> dict:
         return {"original_mat": self.original, "centre": self.centre.round(4).tolist()}

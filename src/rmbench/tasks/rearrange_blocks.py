@@ -28,6 +28,7 @@ import numpy as np
 from rmbench.sim.fixtures import Button, Mat
 from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 
@@ -64,6 +65,12 @@ class RearrangeBlocks(Task):
     aliasing_stage = 2
     hidden_keys = ("loaded_mat",)
     aliasing_pair = (({"loaded_mat": "left"}, 2, 1), ({"loaded_mat": "right"}, 2, 1))
+
+    # The state observation: the mats, the button, and the two identical cubes left to right
+    # (a fixed order would tell the cube that started on a mat from the other).
+    state_names = (*S.xy_names("mat_left"), *S.xy_names("mat_right"), *S.button_names("button"),
+                   *S.pose_names("cube_left", S.CUBE_SYMMETRY),
+                   *S.pose_names("cube_right", S.CUBE_SYMMETRY))
 
     def __init__(self):
         super().__init__()
@@ -104,6 +111,13 @@ class RearrangeBlocks(Task):
 
     def plan(self) -> list[int]:
         return [0, 1, 2]
+
+    def environment_state(self) -> np.ndarray:
+        m, d = self.model, self.data
+        cubes = S.left_to_right(self.cubes, d)
+        return S.assemble(self.state_names, [
+            S.xy(self.mats["left"], m), S.xy(self.mats["right"], m), S.button(self.button, m, d),
+            *(S.pose(c, d, S.CUBE_SYMMETRY) for c in cubes)])
 
     def hidden_state(self) -> dict:
         return {"loaded_mat": self.loaded}

@@ -27,6 +27,7 @@ import numpy as np
 from rmbench.sim.fixtures import Button, Tray
 from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 
@@ -68,6 +69,12 @@ class SwapBlocks(Task):
     hidden_keys = ("empty_tray",)
     aliasing_pair = (({"empty_tray": 2}, 3, 2), ({"empty_tray": 2}, 0, 1))
 
+    # The state observation: the trays (left to right), the button, and the two identical
+    # cubes left to right (a fixed order would tell the first cube from the second).
+    state_names = (*(n for k in range(3) for n in S.xy_names(f"tray{k}")),
+                   *S.button_names("button"), *S.pose_names("cube_left", S.CUBE_SYMMETRY),
+                   *S.pose_names("cube_right", S.CUBE_SYMMETRY))
+
     def __init__(self):
         super().__init__()
         self.trays = tuple(Tray(f"tray{k}") for k in range(3))
@@ -99,6 +106,12 @@ class SwapBlocks(Task):
 
     def plan(self) -> list[int]:
         return [0, 1, 2, 3]
+
+    def environment_state(self) -> np.ndarray:
+        m, d = self.model, self.data
+        return S.assemble(self.state_names, [
+            *(S.xy(t, m) for t in self.trays), S.button(self.button, m, d),
+            *(S.pose(c, d, S.CUBE_SYMMETRY) for c in S.left_to_right(self.cubes, d))])
 
     def hidden_state(self) -> dict:
         first, second = roles(self.empty)

@@ -22,6 +22,7 @@ import numpy as np
 from rmbench.sim.geometry import wrap_angle
 from rmbench.sim.objects import TBlock
 from rmbench.sim.station import TABLE_TOP
+from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.registry import register
 
@@ -55,6 +56,9 @@ class SwapT(Task):
     hidden_keys = ("yaws",)
     aliasing_pair = (({"yaws": (0.5, -0.3)}, 2, 2), ({"yaws": (-0.6, 0.2)}, 2, 2))
 
+    # The state observation: the red T and the blue T (their colours tell them apart).
+    state_names = (*S.pose_names("t_red", 1), *S.pose_names("t_blue", 1))
+
     def __init__(self):
         super().__init__()
         self.blocks = (TBlock("t_left"), TBlock("t_right"))
@@ -80,6 +84,11 @@ class SwapT(Task):
 
     def plan(self) -> list[int]:
         return [0, 1, 2, 3]
+
+    def environment_state(self) -> np.ndarray:
+        red = max(self.blocks, key=lambda b: self.model.geom_rgba[b.geom_id][0])
+        blue = self.blocks[1] if red is self.blocks[0] else self.blocks[0]
+        return S.assemble(self.state_names, [S.pose(red, self.data, 1), S.pose(blue, self.data, 1)])
 
     def hidden_state(self) -> dict:
         return {"yaws": self.starts[:, 2].round(4).tolist(),
