@@ -2,6 +2,7 @@
 the documented length and order, reads the simulator's poses, and hides what the head camera
 cannot see (checked against the camera's own segmentation)."""
 
+import json
 import re
 from pathlib import Path
 
@@ -161,3 +162,70 @@ def test_docs_list_every_entry_in_order():
             names += [f"{row[0]}_{e}" for e in row[1].split()]
         documented[task] = tuple(names)
     assert documented == {name: cls.state_names for name, cls in rmbench.TASKS.items()}
+
+
+# ------------------------------------------------------------------------- datasets
+def test_datasets_record_the_state(dataset):
+    """observation.environment_state: declared with the task's names, with statistics, and
+    row t equal to the env's vector at step t of the recorded episode replayed from its seed."""
+    from rmbench.data import layout as L
+    from rmbench.data.check import check_dataset
+    from rmbench.data.reader import Dataset
+
+    check_dataset(dataset)
+    ds = Dataset(dataset)
+    cls = get_task(ds.task)
+    feature = ds.features[L.ENV_STATE]
+    assert feature == {"dtype": "float32", "shape": [len(cls.state_names)],
+                       "names": list(cls.state_names)}
+    assert list(ds.features).index(L.ENV_STATE) == list(ds.features).index(L.STATE) + 1
+    assert ds.state_names == list(cls.state_names)
+    stats = json.loads((dataset / L.STATS).read_text())[L.ENV_STATE]
+    assert len(stats["mean"]) == len(cls.state_names)
+    ep = ds.episode(0, cameras=[])
+    assert ep.environment_state.shape == (len(ep), len(cls.state_names))
+    assert ep.environment_state.dtype == np.float32
+    env = rmbench.make(ds.task, render=False)
+    env.reset(seed=ep.seed)
+    for t, action in enumerate(ep.action):
+        assert np.array_equal(env.unwrapped.task.environment_state().astype(np.float32),
+                              ep.environment_state[t]), t
+        env.step(action.astype(np.float64))
+    env.close()
+
+
+def _strip_environment_state(root: Path) -> None:
+    """Turn a dataset into one collected before observation.environment_state existed."""
+    import pyarrow.parquet as pq
+
+    from rmbench.data import layout as L
+
+    for path in [*(root / "data").rglob("*.parquet"), *(root / L.EPISODES_DIR).rglob("*.parquet")]:
+        table = pq.read_table(path)
+        keep = [c for c in table.column_names if c != L.ENV_STATE
+                and not c.startswith(f"stats/{L.ENV_STATE}/")]
+        pq.write_table(table.select(keep), path, compression="snappy")
+    for name in (L.INFO, L.STATS):
+        meta = json.loads((root / name).read_text())
+        (meta["features"] if name == L.INFO else meta).pop(L.ENV_STATE)
+        (root / name).write_text(json.dumps(meta, indent=2) + "\n")
+
+
+def test_datasets_without_the_state_stay_readable_and_extend_without_it(tmp_path):
+    from rmbench.data import collect
+    from rmbench.data import layout as L
+    from rmbench.data.check import check_dataset
+    from rmbench.data.reader import Dataset
+    from tests.conftest import small_collection
+
+    out = tmp_path / "old"
+    collect(small_collection(out, episodes=1, cameras=("head",)))
+    _strip_environment_state(out)
+    check_dataset(out)
+    ds = Dataset(out)
+    assert ds.state_names is None and ds.episode(0, cameras=[]).environment_state is None
+    collect(small_collection(out, episodes=2, cameras=("head",)))  # resumes, as it was
+    check_dataset(out)
+    ds = Dataset(out)
+    assert ds.num_episodes == 2 and L.ENV_STATE not in ds.features
+    assert ds.episode(1, cameras=[]).environment_state is None

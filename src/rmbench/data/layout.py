@@ -8,6 +8,7 @@ and resumed at any moment and worker processes never share a file.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +32,9 @@ VIDEO_PATH = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.m
 EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 
 STATE = "observation.state"
+# The task's state observation (rmbench.make(..., obs_type="environment_state_agent_pos")):
+# absent from datasets collected before it existed.
+ENV_STATE = "observation.environment_state"
 EE_POSE = "observation.ee_pose"
 ACTION = "action"
 IMAGE_PREFIX = "observation.images."
@@ -89,8 +93,9 @@ class Spec:
     def video_keys(self) -> list[str]:
         return [image_key(c) for c in self.cameras]
 
-    def features(self) -> dict[str, dict]:
-        """The ``features`` of meta/info.json, in column order."""
+    def features(self, state_names: Sequence[str] | None = None) -> dict[str, dict]:
+        """The ``features`` of meta/info.json, in column order; ``state_names`` (the task's
+        ``state_names``) adds ``observation.environment_state``."""
         feats: dict[str, dict] = {}
         for key in self.video_keys:
             feats[key] = {
@@ -100,6 +105,9 @@ class Spec:
                          **self.codec.info(), "video.is_depth_map": False,
                          "video.fps": self.fps, "video.channels": 3, "has_audio": False}}
         feats[STATE] = {"dtype": "float32", "shape": [ACTION_DIM], "names": JOINT_NAMES}
+        if state_names is not None:
+            feats[ENV_STATE] = {"dtype": "float32", "shape": [len(state_names)],
+                                "names": list(state_names)}
         feats[EE_POSE] = {"dtype": "float32", "shape": [EE_POSE_DIM], "names": EE_NAMES}
         feats[ACTION] = {"dtype": "float32", "shape": [ACTION_DIM], "names": JOINT_NAMES}
         feats[SUBTASK_INDEX] = {"dtype": "int64", "shape": [1], "names": None}

@@ -40,6 +40,9 @@ class Episode:
     key_frames: list[int]
     subtasks: list[str]  # the dataset's subtask table: text of each subtask index
     frames: dict[str, np.ndarray] = field(default_factory=dict)  # camera -> (T, H, W, 3) uint8
+    # (T, len(state_names)) float32, the task's state observation; None in a dataset collected
+    # before the column existed
+    environment_state: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.action)
@@ -100,6 +103,12 @@ class Dataset:
         return self.rmbench["task"]
 
     @property
+    def state_names(self) -> list[str] | None:
+        """Names of ``observation.environment_state``'s entries; None if it is not recorded."""
+        feature = self.features.get(L.ENV_STATE)
+        return None if feature is None else list(feature["names"])
+
+    @property
     def num_episodes(self) -> int:
         return int(self.info["total_episodes"])
 
@@ -145,7 +154,9 @@ class Dataset:
             action=column(table, L.ACTION), subtask_index=column(table, L.SUBTASK_INDEX),
             subtask_end=column(table, L.SUBTASK_END).astype(bool),
             progress=column(table, L.PROGRESS), timestamp=column(table, "timestamp"),
-            key_frames=list(row["rmbench/key_frames"]), subtasks=self.subtasks)
+            key_frames=list(row["rmbench/key_frames"]), subtasks=self.subtasks,
+            environment_state=(column(table, L.ENV_STATE) if L.ENV_STATE in table.column_names
+                               else None))
         for cam in cameras:
             path = self.video_path(cam, index)
             if not path.exists():

@@ -45,6 +45,7 @@ class Trajectory:
     hidden: dict[str, Any]
     state: list[np.ndarray] = field(default_factory=list)
     ee_pose: list[np.ndarray] = field(default_factory=list)
+    environment_state: list[np.ndarray] = field(default_factory=list)  # Task.environment_state
     action: list[np.ndarray] = field(default_factory=list)
     executed: list[np.ndarray] = field(default_factory=list)  # action + noise, as applied
     subtask: list[int] = field(default_factory=list)
@@ -74,6 +75,7 @@ class EpisodeRecord:
     videos: dict[str, bytes] = field(default_factory=dict)  # camera -> mp4
     image_stats: dict[str, dict] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    environment_state: np.ndarray | None = None  # (T, len(Task.state_names)) float32
 
     @property
     def length(self) -> int:
@@ -157,7 +159,8 @@ class Recorder:
             np.asarray(traj.state, np.float32), np.asarray(traj.ee_pose, np.float32),
             np.asarray(traj.action, np.float32), np.asarray(traj.subtask, np.int64),
             np.asarray(traj.progress, np.float32), videos,
-            {c: s.result() for c, s in stats.items()}, timings)
+            {c: s.result() for c, s in stats.items()}, timings,
+            environment_state=np.asarray(traj.environment_state, np.float32))
 
     def _replay(self, seed: int, traj: Trajectory):
         env, _ = self._env(render=True)
@@ -165,7 +168,8 @@ class Recorder:
         stats = {c: ImageStats() for c in self.spec.cameras}
         obs, info = env.reset(seed=seed)
         for t, action in enumerate(traj.executed):
-            if not np.array_equal(obs["agent_pos"], traj.state[t]):
+            if not (np.array_equal(obs["agent_pos"], traj.state[t]) and np.array_equal(
+                    env.unwrapped.task.environment_state(), traj.environment_state[t])):
                 raise ReplayMismatch(f"{self.task} seed {seed}: replay state differs from the "
                                      f"searched episode at frame {t}")
             for cam in self.spec.cameras:
@@ -202,6 +206,7 @@ def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = 
                     else np.asarray(perturb(action), np.float32).astype(np.float64))
         traj.state.append(obs["agent_pos"])
         traj.ee_pose.append(sim.ee_pose())
+        traj.environment_state.append(env.unwrapped.task.environment_state())
         traj.action.append(action)
         traj.executed.append(executed)
         traj.subtask.append(expert.subtask_index)

@@ -66,11 +66,15 @@ def subtask_ends(subtask_index: np.ndarray) -> np.ndarray:
 
 
 def frame_table(rec: EpisodeRecord, episode_index: int, first_index: int,
-                task_index: int, fps: int) -> pa.Table:
+                task_index: int, fps: int, environment_state: bool = True) -> pa.Table:
+    """One episode's rows; ``environment_state=False`` leaves that column out (a dataset
+    collected before it existed, being extended)."""
     n = rec.length
     frames = np.arange(n, dtype=np.int64)
-    cols = {
-        L.STATE: vector_column(rec.state),
+    cols = {L.STATE: vector_column(rec.state)}
+    if environment_state:
+        cols[L.ENV_STATE] = vector_column(rec.environment_state)
+    cols.update({
         L.EE_POSE: vector_column(rec.ee_pose),
         L.ACTION: vector_column(rec.action),
         L.SUBTASK_INDEX: pa.array(rec.subtask_index.astype(np.int64)),
@@ -81,7 +85,7 @@ def frame_table(rec: EpisodeRecord, episode_index: int, first_index: int,
         "episode_index": pa.array(np.full(n, episode_index, np.int64)),
         "index": pa.array(first_index + frames),
         "task_index": pa.array(np.full(n, task_index, np.int64)),
-    }
+    })
     return pa.table(cols)
 
 
@@ -112,6 +116,9 @@ class DatasetWriter:
         self.episodes: list[dict[str, Any]] = []  # committed rows (without stats columns)
         self._stats: list[dict[str, dict]] = []
         self.skipped: list[dict[str, Any]] = []
+        # Record observation.environment_state; False when extending a dataset whose
+        # episodes were collected before that column existed.
+        self.environment_state = True
         if overwrite and self.root.exists():
             self._remove()
         if (self.root / L.RMBENCH).exists():
@@ -147,7 +154,8 @@ class DatasetWriter:
                              f"the task's training instructions")
         e = self.num_episodes
         first = self.total_frames
-        table = frame_table(rec, e, first, self.instructions.index(rec.instruction), self.spec.fps)
+        table = frame_table(rec, e, first, self.instructions.index(rec.instruction), self.spec.fps,
+                            self.environment_state)
         for cam in self.spec.cameras:
             write_atomic(self.root / L.video_file(L.image_key(cam), e), rec.videos[cam])
         write_parquet(self.root / L.data_file(e), table)
@@ -196,7 +204,8 @@ class DatasetWriter:
             "chunks_size": L.CHUNKS_SIZE, "data_files_size_in_mb": 100,
             "video_files_size_in_mb": 500, "fps": self.spec.fps,
             "splits": {"train": f"0:{n}"}, "data_path": L.DATA_PATH, "video_path": L.VIDEO_PATH,
-            "features": self.spec.features(),
+            "features": self.spec.features(self.task.state_names if self.environment_state
+                                           else None),
         }
         tasks = pd.DataFrame({"task_index": np.arange(len(self.instructions), dtype=np.int64)},
                              index=pd.Index(self.instructions, name="task"))
@@ -234,6 +243,16 @@ class DatasetWriter:
                 stats.setdefault(key, {})[stat] = np.asarray(row.pop(col))
             self.episodes.append(row)
             self._stats.append(stats)
+        if self.episodes:
+            self.environment_state = L.ENV_STATE in self._stats[0]
+            try:
+                names = json.loads((self.root / L.INFO).read_text())["features"].get(
+                    L.ENV_STATE, {}).get("names")
+            except (OSError, json.JSONDecodeError, KeyError):
+                names = None
+            if self.environment_state and names != list(self.task.state_names):
+                raise DatasetError(f"{self.root} records another {L.ENV_STATE} layout than "
+                                   f"{self.task.name}'s state_names now; --overwrite to start over")
         last_seed = self.episodes[-1]["rmbench/seed"] if self.episodes else -1
         self.skipped = [s for s in saved.get("skipped", []) if s["seed"] < last_seed]
         removed = self._remove_uncommitted()
