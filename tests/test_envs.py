@@ -108,7 +108,7 @@ def test_unknown_task_lists_known_ones():
         rmbench.make("no_such_task")
     with pytest.raises(UnknownTaskError, match="known tasks"):
         get_task("rmbench/NoSuchTask-v0")
-    assert get_task("rmbench/PutBackBlock-v0").name == "put_back_block"
+    assert get_task("rmbench/PutBackBlock-v1").name == "put_back_block"
 
 
 def test_registry_refuses_duplicates():

@@ -1,4 +1,7 @@
-"""Gymnasium ids ``rmbench/<TaskName>-v0`` for every registered task, and ``rmbench.make``."""
+"""Gymnasium ids ``rmbench/<TaskName>-v<N>`` for every registered task, and ``rmbench.make``.
+
+N goes up whenever a task's behaviour changes (v1: debounced buttons, rubber finger pads,
+servos that follow a jumpy target with a lag, experts that close the loop)."""
 
 from __future__ import annotations
 

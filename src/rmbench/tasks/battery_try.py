@@ -52,7 +52,7 @@ def flips(correct: tuple[int, int]) -> list[int]:
 @register
 class BatteryTry(Task):
     name = "battery_try"
-    gym_id = "rmbench/BatteryTry-v0"
+    gym_id = "rmbench/BatteryTry-v1"
     tmc = "M(n)"
     step_limit = 1000
     subtasks = ("insert the left battery", "insert the right battery",

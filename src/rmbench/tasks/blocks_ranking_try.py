@@ -63,7 +63,7 @@ def trial_orders(initial: tuple[int, ...], target: tuple[int, ...]) -> list[tupl
 @register
 class BlocksRankingTry(Task):
     name = "blocks_ranking_try"
-    gym_id = "rmbench/BlocksRankingTry-v0"
+    gym_id = "rmbench/BlocksRankingTry-v1"
     tmc = "M(n)"
     step_limit = 3500
     subtasks = ("press the button to check the order", "swap the middle and right blocks",

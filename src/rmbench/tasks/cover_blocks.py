@@ -47,7 +47,7 @@ HIDDEN_RIM = 0.04
 @register
 class CoverBlocks(Task):
     name = "cover_blocks"
-    gym_id = "rmbench/CoverBlocks-v0"
+    gym_id = "rmbench/CoverBlocks-v1"
     tmc = "M(n)"
     step_limit = 1500
     subtasks = ("cover the left block", "cover the middle block", "cover the right block",

@@ -50,7 +50,7 @@ OTHER_SHAPE_P = 0.8
 @register
 class ObserveAndPickup(Task):
     name = "observe_and_pickup"
-    gym_id = "rmbench/ObserveAndPickup-v0"
+    gym_id = "rmbench/ObserveAndPickup-v1"
     tmc = "M(1)"
     step_limit = 250
     subtasks = ("watch the reference object", "pick up the matching object")

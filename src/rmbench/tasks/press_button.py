@@ -32,7 +32,7 @@ TILE_OFFSET = 0.12
 @register
 class PressButton(Task):
     name = "press_button"
-    gym_id = "rmbench/PressButton-v0"
+    gym_id = "rmbench/PressButton-v1"
     tmc = "M(n)"
     step_limit = 1500
     subtasks = ("press the left button", "press the middle button", "press the confirm button")

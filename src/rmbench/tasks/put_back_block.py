@@ -37,7 +37,7 @@ MAT_TOL = 0.03
 @register
 class PutBackBlock(Task):
     name = "put_back_block"
-    gym_id = "rmbench/PutBackBlock-v0"
+    gym_id = "rmbench/PutBackBlock-v1"
     tmc = "M(1)"
     step_limit = 500
     subtasks = ("move the block to the centre", "press the button",

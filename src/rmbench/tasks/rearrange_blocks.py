@@ -40,7 +40,7 @@ MAT_SIDES = ("left", "right")
 @register
 class RearrangeBlocks(Task):
     name = "rearrange_blocks"
-    gym_id = "rmbench/RearrangeBlocks-v0"
+    gym_id = "rmbench/RearrangeBlocks-v1"
     tmc = "M(1)"
     step_limit = 700
     subtasks = ("move the middle block onto the empty mat", "press the button",

@@ -32,7 +32,7 @@ def ordered() -> list[type[Task]]:
 
 
 def get_task(name: str) -> type[Task]:
-    """A task class by name (``put_back_block``) or gym id (``rmbench/PutBackBlock-v0``)."""
+    """A task class by name (``put_back_block``) or gym id (``rmbench/PutBackBlock-v1``)."""
     if name in TASKS:
         return TASKS[name]
     for cls in TASKS.values():

@@ -45,7 +45,7 @@ def roles(empty: int) -> tuple[int, int]:
 @register
 class SwapBlocks(Task):
     name = "swap_blocks"
-    gym_id = "rmbench/SwapBlocks-v0"
+    gym_id = "rmbench/SwapBlocks-v1"
     tmc = "M(1)"
     step_limit = 1000
     subtasks = ("move the first block to the empty tray",

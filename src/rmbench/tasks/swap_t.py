@@ -35,7 +35,7 @@ COLOURS = ((0.85, 0.1, 0.1, 1.0), (0.1, 0.25, 0.85, 1.0))
 @register
 class SwapT(Task):
     name = "swap_T"
-    gym_id = "rmbench/SwapT-v0"
+    gym_id = "rmbench/SwapT-v1"
     tmc = "M(1)"
     step_limit = 600
     subtasks = ("pick up the left T block", "pick up the right T block",
