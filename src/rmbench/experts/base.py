@@ -39,7 +39,8 @@ class ScriptedExpert:
         self.gave_up = ""  # why the expert stopped before the task was done, if it did
 
     def reset(self, instruction: str = "", task_info: dict[str, Any] | None = None) -> None:
-        self.motion = Motion(self.ik)
+        sim = self.env.sim
+        self.motion = Motion(self.ik, sim.config.substeps, sim.servo_gain)
         self._plan = self.plan(self.env.task)
         self._last = self.motion.cmd.copy()
         self.finished = False

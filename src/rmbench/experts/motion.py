@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rmbench.experts.ik import ArmIK, top_down_quat
+from rmbench.sim.simulator import servo_setpoint
 from rmbench.sim.station import ARM_MOUNTS, HOME_ARM, home_action
 
 DT = 0.05  # control period (20 Hz)
@@ -25,14 +26,18 @@ FINE_SPEED = 0.15  # m/s, last centimetres of descents
 JOINT_SPEED = 1.6  # rad/s, joint-space moves
 CLOSED, OPEN = 0.0, 1.0
 ARM_ENTRIES = np.r_[0:6, 7:13]  # action entries of the arm joints (not the grippers)
-# Joint feedback: the measured joints are compared with the previous command every step and
-# the difference, low-passed with this gain per step, is taken off the next command. A slow
-# error (a drift, an offset, sag under load) is removed within a few steps; the gain is low
-# enough that a step-to-step jitter is not amplified (an EMA of white noise adds
-# GAIN / (2 - GAIN) of its variance).
-FEEDBACK_GAIN = 0.3
+# Joint feedback: every step the measured joints are compared with where the servos should
+# be (the commands sent, through the servos' known lag) and the difference, low-passed with
+# this gain per step, is taken off the next command. A slow error (a drift, an offset, sag
+# under load) is removed within a few steps; the gain is low enough that a step-to-step
+# jitter is not amplified much (an EMA of white noise adds GAIN / (2 - GAIN) of its
+# variance). Comparing with the lagged setpoint, not the command itself, matters: the lag
+# read as an offset would make every move overshoot by the distance the servos trail.
+FEEDBACK_GAIN = 0.6
 FEEDBACK_LIMIT = 0.15  # rad: never correct more than this per joint
 
+ALIGN_TOL = 0.003  # m: line up until the held piece is this close to its target (xy)
+ALIGN_STEPS = 3  # corrections at most
 PLACE_TOL = 0.02  # m: a piece set down farther than this from its target is set down again
 ATTEMPTS = 3  # grasps (and set-downs) of one piece before the expert gives up
 
@@ -90,18 +95,20 @@ def nearer_side(xy) -> str:
 
 
 class Motion:
-    def __init__(self, ik: ArmIK):
+    def __init__(self, ik: ArmIK, substeps: int = 25, servo_gain: float = 1.0):
         self.ik = ik
         self.cmd = home_action()
         self.away: set[str] = set()  # arms out of their home pose
         self.offset = np.zeros(len(ARM_ENTRIES))  # estimated executed-minus-commanded joints
         self.sent: np.ndarray | None = None  # the last action handed out
+        self.substeps, self.servo_gain = substeps, servo_gain  # the station's servos
+        self.setpoint = self.cmd.copy()  # where the servos should be, had no noise been added
 
     def observe(self, agent_pos: np.ndarray) -> None:
         """Update the joint-offset estimate from the measured joints (see FEEDBACK_GAIN)."""
         if self.sent is None:
             return
-        error = agent_pos[ARM_ENTRIES] - self.sent[ARM_ENTRIES]
+        error = agent_pos[ARM_ENTRIES] - self.setpoint[ARM_ENTRIES]
         self.offset += FEEDBACK_GAIN * (error - self.offset)
         np.clip(self.offset, -FEEDBACK_LIMIT, FEEDBACK_LIMIT, out=self.offset)
 
@@ -109,6 +116,10 @@ class Motion:
         """``action`` corrected by the estimated joint offset (a new array)."""
         out = np.array(action, float)
         out[ARM_ENTRIES] -= self.offset
+        start = self.setpoint if self.sent is None else self.sent  # at rest at first
+        for i in range(1, self.substeps + 1):
+            self.setpoint = servo_setpoint(self.setpoint, start, out, i / self.substeps,
+                                           self.servo_gain)
         self.sent = out.copy()
         return out
 
@@ -207,13 +218,30 @@ class Motion:
         yield from self.move_to(side, grip + (0, 0, hover), yaw, FINE_SPEED)
 
     def place(self, side: str, target, yaw: float, height: float, opening: float = OPEN,
-              hover: float = HOVER) -> Actions:
+              hover: float = HOVER,
+              locate: Callable[[], tuple[np.ndarray, float]] | None = None) -> Actions:
         """Carry the held object over ``target`` (table xy, z of the surface), set it down, open
-        (to ``opening``), and rise."""
+        (to ``opening``), and rise. With ``locate`` (the held piece's grasp centre, live), the
+        hand shifts on the way down until the piece itself, not the hand, is over the target:
+        that absorbs an off-centre grasp and a drifting arm."""
         target = np.asarray(target, float)
         release = np.array([target[0], target[1],
                             target[2] + FINGER_TIP_BELOW_SITE + 0.010 + 0.004])
         yield from self.move_to(side, release + (0, 0, hover), yaw)
+        if locate is not None:
+            # Lined up at the hover height and again halfway down, where the piece still
+            # clears what stands at the target (a cube under a cover, a holder's plates).
+            aim = release.copy()
+            for height in (hover, hover / 2):
+                yield from self.move_to(side, aim + (0, 0, height), yaw, FINE_SPEED)
+                for _ in range(ALIGN_STEPS):
+                    yield from self.hold(2)  # let the piece stop swinging before looking
+                    error = target[:2] - locate()[0][:2]
+                    if np.linalg.norm(error) <= ALIGN_TOL:
+                        break
+                    aim[:2] += error
+                    yield from self.move_to(side, aim + (0, 0, height), yaw, FINE_SPEED)
+            release = aim
         yield from self.move_to(side, release, yaw, FINE_SPEED)
         yield from self.gripper(side, opening, 6)
         yield from self.move_to(side, release + (0, 0, hover), yaw, FINE_SPEED)
@@ -253,7 +281,7 @@ class Motion:
             if abs(turn) > 1e-3:
                 yield from self.twist(side, turn)
             yield from self.place(side, dest, yaw + turn, handle.height, handle.opening,
-                                  handle.hover)
+                                  handle.hover, handle.locate)
             if placed():
                 return
         raise GaveUp(f"could not move a piece to {np.round(dest[:2], 3).tolist()} in "

@@ -87,7 +87,7 @@ class BatteryHolder(StaticPiece):
     head camera cannot see which way an inserted cell points."""
 
     spacing: float = 0.07
-    slot_length: float = 0.066
+    slot_length: float = 0.074
     plate: tuple = (0.03, 0.004, 0.03)  # x, y, z extent of a contact plate
     rgba: tuple = (0.3, 0.3, 0.34, 1.0)
 

@@ -116,7 +116,7 @@ class Cover(FreePiece):
     The body origin is the centre of the open bottom; the gripper takes the knob.
     """
 
-    inner: float = 0.064
+    inner: float = 0.076  # 18 mm each side of a 40 mm cube: room for a hand a little off
     wall: float = 0.004
     height: float = 0.062
     knob: float = 0.022  # knob edge (square) and height

@@ -32,7 +32,7 @@ DAMPING = {"waist": 5.0, "shoulder": 8.0, "elbow": 5.0, "forearm_roll": 1.0, "wr
            "wrist_rotate": 0.5}
 # Finger pads: rubber on a plastic or wooden piece (sliding friction about 1.5-2). At the
 # asset's 1.0, a 50 g cube slid out of a 4 N grip within a dozen steps of a jittery carry.
-FINGER_FRICTION = (2.0, 0.01, 0.0001)
+FINGER_FRICTION = (2.0, 0.03, 0.0001)
 FRICTIONLOSS = {"waist": 5.0, "shoulder": 6.0, "elbow": 6.0, "forearm_roll": 1.0,
                 "wrist_angle": 1.0, "wrist_rotate": 0.5}
 

@@ -27,6 +27,14 @@ def _register_exit_hook() -> None:
     atexit.register(lambda: [sim.close() for sim in list(_LIVE)])
 
 
+def servo_setpoint(setpoint: np.ndarray, start: np.ndarray, goal: np.ndarray, fraction: float,
+                   gain: float) -> np.ndarray:
+    """The servos' setpoint after one physics step: it moves ``gain`` of the way to the
+    reference, which runs linearly from ``start`` to ``goal`` over the control period
+    (``fraction`` of it has passed). Controllers that predict the arm use the same rule."""
+    return setpoint + gain * (start + (goal - start) * fraction - setpoint)
+
+
 def data_renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Renderer:
     """A renderer set up for data cameras: no shadows, reflections or skybox (the model's
     offscreen buffer already has anti-aliasing off)."""
@@ -73,7 +81,7 @@ class Simulator:
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._target = np.zeros(m.nu)
         # Per physics step, the setpoint moves this fraction of the way to the reference.
-        self._servo_gain = (1.0 if config.servo_tau == 0
+        self.servo_gain = (1.0 if config.servo_tau == 0
                             else float(-np.expm1(-config.timestep / config.servo_tau)))
 
     # ------------------------------------------------------------------ state
@@ -130,9 +138,9 @@ class Simulator:
         setpoints (``data.ctrl``) follow it with the first-order lag ``servo_tau``."""
         start = self._target
         goal = self.action_to_ctrl(action)
-        n, gain, ctrl = self.config.substeps, self._servo_gain, self.data.ctrl
+        n, ctrl = self.config.substeps, self.data.ctrl
         for i in range(1, n + 1):
-            ctrl += gain * (start + (goal - start) * (i / n) - ctrl)
+            ctrl[:] = servo_setpoint(ctrl, start, goal, i / n, self.servo_gain)
             mujoco.mj_step(self.model, self.data)
             if on_substep is not None:
                 on_substep()
