@@ -156,3 +156,23 @@ def test_a_push_that_does_not_register_is_made_again():
         if terminated or truncated:
             break
     assert task.left.press_depth == click and info["is_success"], info.get("failure_reason")
+
+
+def test_robustness_command_reports_success_per_sigma(capsys):
+    from rmbench.cli.main import main
+
+    assert main(["robustness", "observe_and_pickup", "--kind", "offset", "--noise", "0,0.02",
+                 "--episodes", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [r["sigma"] for r in out["results"]] == [0.0, 0.02]
+    assert all(r["episodes"] == 2 and 0.0 <= r["success_rate"] <= 1.0 for r in out["results"])
+    assert out["results"][0]["success_rate"] == 1.0  # the clean expert
+
+
+def test_robustness_command_refuses_bad_noise_in_one_line(capsys):
+    from rmbench.cli.main import main
+
+    assert main(["robustness", "put_back_block", "--kind", "smooth", "--tau", "0",
+                 "--episodes", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "tau" in err
