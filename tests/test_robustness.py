@@ -8,9 +8,10 @@ import pytest
 import rmbench
 from rmbench.data import CollectConfig
 from rmbench.data.record import run_expert as record_episode
-from rmbench.envs.noise import ARM_JOINTS, NoiseSpec
+from rmbench.envs.noise import NoiseSpec
 from rmbench.experts import make_expert
 from rmbench.rollout import run_episode
+from rmbench.sim.simulator import ARM_ENTRIES
 
 DT = 0.05
 
@@ -33,13 +34,13 @@ def test_noise_touches_only_arm_joints_and_is_reproducible(kind):
     assert np.array_equal(x, draws(spec, 200))
     assert not np.array_equal(x, draws(spec, 200, seed=8))
     assert np.all(x[:, [6, 13]] == 0.0)  # grippers untouched
-    assert np.all(x[:, ARM_JOINTS] != 0.0)
+    assert np.all(x[:, ARM_ENTRIES] != 0.0)
 
 
 def test_noise_kinds_have_their_statistics():
-    white = draws(NoiseSpec("white", 0.02), 4000)[:, ARM_JOINTS]
-    smooth = draws(NoiseSpec("smooth", 0.02, tau=0.5), 20000)[:, ARM_JOINTS]
-    offset = draws(NoiseSpec("offset", 0.02), 50)[:, ARM_JOINTS]
+    white = draws(NoiseSpec("white", 0.02), 4000)[:, ARM_ENTRIES]
+    smooth = draws(NoiseSpec("smooth", 0.02, tau=0.5), 20000)[:, ARM_ENTRIES]
+    offset = draws(NoiseSpec("offset", 0.02), 50)[:, ARM_ENTRIES]
     assert white.std() == pytest.approx(0.02, rel=0.05)
     assert smooth.std() == pytest.approx(0.02, rel=0.15)
     lag1 = np.mean([np.corrcoef(smooth[:-1, j], smooth[1:, j])[0, 1] for j in range(12)])

@@ -18,10 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rmbench.sim.simulator import ACTION_DIM
+from rmbench.sim.simulator import ACTION_DIM, ARM_ENTRIES
 
 NOISE_KINDS = ("white", "smooth", "offset")
-ARM_JOINTS = np.r_[0:6, 7:13]  # the action entries noise applies to (not the grippers)
 _STREAM = 0x6E6F6973  # separates the noise generator from the scene's, for the same seed
 
 
@@ -65,18 +64,18 @@ class ActionNoise:
         self.spec, self.rng = spec, rng
         self.decay = float(np.exp(-dt / spec.tau))
         # Start in the stationary distribution, so the first steps are as noisy as the rest.
-        self.state = rng.normal(0.0, spec.sigma, len(ARM_JOINTS))
+        self.state = rng.normal(0.0, spec.sigma, len(ARM_ENTRIES))
 
     def next(self) -> np.ndarray:
         s, out = self.spec, np.zeros(ACTION_DIM)
         if s.kind == "white":
-            out[ARM_JOINTS] = self.rng.normal(0.0, s.sigma, len(ARM_JOINTS))
+            out[ARM_ENTRIES] = self.rng.normal(0.0, s.sigma, len(ARM_ENTRIES))
             return out
         if s.kind == "smooth":
             innovation = self.rng.normal(0.0, s.sigma * np.sqrt(1 - self.decay ** 2),
-                                         len(ARM_JOINTS))
+                                         len(ARM_ENTRIES))
             self.state = self.decay * self.state + innovation
-        out[ARM_JOINTS] = self.state  # offset: the first draw, held
+        out[ARM_ENTRIES] = self.state  # offset: the first draw, held
         return out
 
     def perturb(self, action: np.ndarray) -> np.ndarray:
