@@ -29,8 +29,8 @@ CLOSED, OPEN = 0.0, 1.0
 # be (the commands sent, through the servos' known lag) and the difference, low-passed with
 # this gain per step, is taken off the next command. A slow error (a drift, an offset, sag
 # under load) is removed within a few steps. The price is a little step-to-step jitter: an
-# EMA of white noise adds GAIN / (2 - GAIN) of its variance (0.43 here, a 20% larger std);
-# at 0.3 the expert tracked a smooth drift too slowly to set a battery into its slot.
+# EMA of white noise adds GAIN / (2 - GAIN) of its variance (0.43 here, a 20% larger std),
+# against a drift followed within about two steps.
 # Comparing with the lagged setpoint, not the command itself, matters: the lag read as an
 # offset would make every move overshoot by the distance the servos trail.
 FEEDBACK_GAIN = 0.6
