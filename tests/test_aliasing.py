@@ -12,16 +12,16 @@ Euclidean distances, measured (seed 100000, ``benchmarks/aliasing.py``): the pai
 over the first frames of seed 100000 and each of 100001-100008; their ratio; the ratio
 without the headings of symmetric pieces ("core"). In brackets the ratios from seed 100004.
 
-    task                pair     layouts  ratio            core
-    observe_and_pickup  0.0      5.237    0.0              0.0     [0.0,    0.0]
-    put_back_block      0.0184   1.263    0.0146 [0.023]   0.0155  [0.0258]
-    rearrange_blocks    0.0227   1.261    0.0180 [0.022]   0.0371  [0.0601]
-    swap_T              0.0031   0.882    0.0035 [0.006]   0.0035  [0.0062]
-    swap_blocks         0.0338   0.680    0.0497 [1.954]   0.1000  [0.0882]
-    battery_try         0.0087   2.303    0.0038 [0.009]   0.0020  [0.0029]
-    blocks_ranking_try  0.8042   1.565    0.5139 [0.052]   0.0028  [0.0034]
-    cover_blocks        0.0      2.597    0.0              0.0     [0.0,    0.0]
-    press_button        0.0      4.067    0.0              0.0     [0.0,    0.0]
+    task                pair     layouts  ratio             core
+    observe_and_pickup  0.0      5.237    0.0     [0.0]     0.0     [0.0]
+    put_back_block      0.0057   1.263    0.0045  [0.0019]  0.0022  [0.0034]
+    rearrange_blocks    0.0114   1.261    0.0090  [0.0089]  0.0057  [0.0112]
+    swap_T              0.0010   0.882    0.0012  [0.0017]  0.0012  [0.0017]
+    swap_blocks         0.0429   0.680    0.0631  [2.0158]  0.0751  [0.0696]
+    battery_try         0.0008   2.303    0.0003  [0.0023]  0.0003  [0.0006]
+    blocks_ranking_try  0.8025   1.565    0.5128  [0.0449]  0.0011  [0.0005]
+    cover_blocks        0.0      2.597    0.0     [0.0]     0.0     [0.0]
+    press_button        0.0      4.067    0.0     [0.0]     0.0     [0.0]
 
 The core residue is placement jitter (millimetres). The full ratio is high where the pair's
 moments have cubes in each other's places (blocks_ranking_try at 100000, swap_blocks at
@@ -32,7 +32,7 @@ from a drawn one, so the test bounds the core ratio.
 
 from rmbench.aliasing import measure
 
-STATE_RATIO = 0.2  # the core ratio's bound; measured at most 0.1 (swap_blocks)
+STATE_RATIO = 0.2  # the core ratio's bound; measured at most 0.075 (swap_blocks)
 
 
 def test_aliasing_point(task_name):
