@@ -199,8 +199,8 @@ def test_overwrite_starts_over_and_foreign_folders_are_safe(tmp_path):
 def test_failed_seeds_are_skipped_and_logged(tmp_path, monkeypatch):
     real = record.run_expert
 
-    def fail_seed_1(env, expert, seed, *args):
-        traj = real(env, expert, seed, *args)
+    def fail_seed_1(env, expert, seed, *args, **kwargs):
+        traj = real(env, expert, seed, *args, **kwargs)
         if seed == 1:
             traj.success, traj.reason = False, "timeout"
         return traj

@@ -14,11 +14,14 @@ def settle(env, steps=150):
 
 
 def press(env, button):
-    """Drive a button through a full push the way physics would: down past, then back up."""
+    """Drive a button through a full push the way physics would: down past the click, back up,
+    and left up long enough to re-arm (the button debounces)."""
     data = env.unwrapped.sim.data
     data.qpos[button.qpos_adr] = -button.travel
     env.unwrapped.task.on_substep()
     data.qpos[button.qpos_adr] = 0.0
+    env.unwrapped.task.on_substep()
+    data.time += button.rearm_time + 1e-3
     env.unwrapped.task.on_substep()
 
 

@@ -158,3 +158,28 @@ def test_observe_and_pickup_screen_stillness_and_wrong_object():
     settle(env, 1)
     ev = task.evaluate()
     assert ev.failure and "wrong object" in ev.failure_reason
+
+
+def test_battery_polarity_is_hidden_from_the_head_camera_once_inserted():
+    """Cells at rest in their slots look the same to the head camera whichever way they point
+    (the memory the task tests); a few layouts, both cells flipped at once."""
+    import mujoco
+
+    import rmbench
+
+    env = rmbench.make("battery_try", cameras=("head",))
+    task, sim = env.unwrapped.task, env.unwrapped.sim
+    for seed in (100001, 100002, 100005):
+        env.reset(seed=seed)
+        frames = []
+        for yaw in (np.pi / 2, -np.pi / 2):
+            mujoco.mj_resetData(sim.model, sim.data)
+            sim.reset_robot()
+            for k, cell in enumerate(task.batteries):
+                cell.place(sim.data, task.holder.slot(sim.model, k), yaw=yaw)
+            for _ in range(200):
+                mujoco.mj_step(sim.model, sim.data)
+            frames.append(sim.render(["head"])["head"].astype(int))
+        differing = int((np.abs(frames[0] - frames[1]).max(-1) > 10).sum())
+        assert differing == 0, f"seed {seed}: {differing} pixels tell the polarity"
+    env.close()

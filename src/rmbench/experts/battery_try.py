@@ -13,7 +13,7 @@ from rmbench.tasks.battery_try import PAIRS, SLOT_TOL, TRIES
 
 OPENING = 0.5  # enough for a 24 mm cell, narrow beside the holder's plates
 AWAY = np.pi / 2  # yaw of a positive end pointing away from the robot
-HOVER = 0.06  # clears the 3 cm contact plates with a cell in hand
+HOVER = 0.08  # halfway down (where a set-down is lined up) a held cell still clears the plates
 
 
 @register_expert

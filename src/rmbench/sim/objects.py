@@ -211,8 +211,11 @@ class Battery(FreePiece):
         body.add_geom(name=f"{self.name}/collision", type=BOX,
                       size=[half, self.radius * 0.92, self.radius], group=3,
                       rgba=[0, 0, 0, 0], friction=[1.0, 0.005, 0.0001], condim=4)
+        # The gold face sits flush with the end (0.1 mm proud): a disc standing out further
+        # showed its rim from above, in the gap beyond a slotted cell's end, and told the
+        # head camera which way an inserted cell points.
         body.add_geom(name=f"{self.name}/plus_face", type=CYLINDER,
-                      size=[self.radius * 0.95, 0.001], pos=[half, 0, 0], quat=along_x,
+                      size=[self.radius * 0.95, 0.001], pos=[half - 0.0009, 0, 0], quat=along_x,
                       rgba=list(self.terminal_rgba), contype=0, conaffinity=0)
         body.add_geom(name=f"{self.name}/nub", type=CYLINDER, size=[0.004, 0.0015],
                       pos=[half + 0.0015, 0, 0], quat=along_x, rgba=list(self.terminal_rgba),
