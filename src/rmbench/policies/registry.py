@@ -1,11 +1,18 @@
 """Policy specs: ``NAME`` or ``NAME:ARGUMENT`` (``expert``, ``replay:DIR``, ``remote:ws://...``)
 mapped to factories. New policies register here and every command that takes ``--policy``
-can run them."""
+can run them.
+
+The modules that register policies are named in the ``rmbench.policies`` entry-point group
+(pyproject.toml: the built-in policies, and the ``remote:`` client in serve/) and imported on
+first use. They import this module, never the other way round, so the registry stays below
+every policy, wherever it lives; another installed package can add policies the same way.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from importlib.metadata import EntryPoints, entry_points
 
 from rmbench.policies.base import Policy
 
@@ -42,12 +49,14 @@ def register_policy(name: str, help: str, needs_argument: bool = False,
 
 
 def parse_spec(spec: str) -> tuple[PolicyEntry, str | None]:
-    _load_builtin()
+    _load_plugins()
     name, sep, arg = spec.partition(":")
     if name not in POLICIES:
+        hint = "" if _plugins() else (f" (no {ENTRY_POINT_GROUP!r} entry points: rmbench's come "
+                                      "with its installation, pip install -e .)")
         raise UnknownPolicyError(f"unknown policy {spec!r}; policies: "
                                  + ", ".join(f"{e.name}{':ARG' if e.needs_argument else ''}"
-                                             for e in POLICIES.values()))
+                                             for e in POLICIES.values()) + hint)
     entry = POLICIES[name]
     if entry.needs_argument and not arg:
         raise UnknownPolicyError(f"policy {name!r} needs an argument: {name}:ARG ({entry.help})")
@@ -62,6 +71,20 @@ def make_policy(spec: str, env) -> Policy:
     return entry.factory(arg, env)
 
 
-def _load_builtin() -> None:
-    from rmbench.policies import builtin  # noqa: F401  (registers)
-    from rmbench.serve import client  # noqa: F401  (registers remote:)
+ENTRY_POINT_GROUP = "rmbench.policies"
+_loaded = False
+
+
+def _plugins() -> EntryPoints:
+    return entry_points(group=ENTRY_POINT_GROUP)
+
+
+def _load_plugins() -> None:
+    """Imports each module of the entry-point group (registering its policies) once. A module
+    that fails to import raises here, and the next call tries again."""
+    global _loaded
+    if _loaded:
+        return
+    for plugin in _plugins():
+        plugin.load()  # an import: a module loaded before is not run (nor registered) again
+    _loaded = True

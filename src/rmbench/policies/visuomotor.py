@@ -25,7 +25,7 @@ from rmbench.data import layout as L
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
 from rmbench.policies.base import BasePolicy
-from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
+from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config, save_checkpoint
 from rmbench.policies.config import PolicyConfig, parse_argument
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.vision import color_jitter
@@ -155,7 +155,8 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
         sampler = RandomFrameSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
         return batch_stream(frames, sampler, start, workers)
 
-    return train(trainer, batches, train_cfg, out, describe, progress)
+    return train(trainer, batches, train_cfg, out, describe, progress,
+                 write_checkpoint=save_checkpoint)
 
 
 class VisuomotorPolicy(BasePolicy):

@@ -9,7 +9,8 @@ the group's minimum, gradient-norm clipping.
 Resume: ``OUT/training/state.pt`` holds weights, optimiser, RNG and extra state, written
 atomically; it is the commit point. A re-run with the same arguments continues from it and,
 batches being a function of the step, gives the weights an uninterrupted run gives.
-``OUT/model.safetensors`` + ``OUT/config.json`` (the inference checkpoint) and
+``OUT/model.safetensors`` + ``OUT/config.json`` (the inference checkpoint, written by the
+function the policy passes: its format is the policies', and training sits below them) and
 ``OUT/training/loss.csv`` / ``loss.png`` are derived from it. Under torchrun each rank trains on
 its own episode stream and rank 0 writes.
 """
@@ -33,7 +34,6 @@ from torch import nn
 from tqdm import tqdm
 
 from rmbench.identity import differences
-from rmbench.policies.checkpoint import save_checkpoint
 from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
@@ -94,12 +94,17 @@ class Dist:
 
 # (first step, rank, world) -> batches for that step onwards
 BatchSource = Callable[[int, int, int], Iterator[dict[str, torch.Tensor]]]
+# (folder, model to export, describe, step) -> None: writes the inference checkpoint
+# (rmbench.policies.checkpoint.save_checkpoint)
+CheckpointWriter = Callable[[Path, nn.Module, dict[str, Any], int], None]
 
 
 def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | Path,
-          describe: dict[str, Any], progress: bool = True) -> dict[str, Any]:
+          describe: dict[str, Any], progress: bool = True, *,
+          write_checkpoint: CheckpointWriter) -> dict[str, Any]:
     """Train ``model`` for ``cfg.steps`` steps into ``out``; ``describe`` is what the
-    inference checkpoint's config.json holds (and what a resume must match)."""
+    inference checkpoint's config.json holds (and what a resume must match), and
+    ``write_checkpoint`` writes that checkpoint at each save."""
     out = Path(out)
     dist = Dist.from_env()
     if dist.world > 1 and not torch.distributed.is_initialized():
@@ -154,7 +159,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
         bar.update(1)
         if (step + 1) % cfg.save_every == 0 or step + 1 == cfg.steps:
             if lead:
-                _save(out, model, opt, identity, step + 1, rows)
+                _save(out, model, opt, identity, step + 1, rows, write_checkpoint)
                 rows = []
             last_save = step + 1
     bar.close()
@@ -165,7 +170,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
 
 
 def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict, step: int,
-          rows: list[dict]) -> None:
+          rows: list[dict], write_checkpoint: CheckpointWriter) -> None:
     state = {"step": step, "identity": json.dumps(identity, sort_keys=True),
              "model": model.state_dict(), "optimizer": opt.state_dict(),
              "rng": torch.get_rng_state(),
@@ -177,7 +182,7 @@ def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dic
     _append_curve(out, rows, step)
     write_atomic(out / STATE, buf.getvalue())  # the commit point
     export = model.export_module() if hasattr(model, "export_module") else model
-    save_checkpoint(out, export, identity["describe"], step)
+    write_checkpoint(out, export, identity["describe"], step)
     _plot_curve(out)
 
 

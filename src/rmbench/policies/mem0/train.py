@@ -14,6 +14,7 @@ import torch
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
+from rmbench.policies.checkpoint import save_checkpoint
 from rmbench.policies.mem0.classifier import end_labels
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
@@ -94,7 +95,8 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         sampler = EpisodeOrderSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
         return batch_stream(frames, sampler, start, workers)
 
-    result = train(trainer, batches, train_cfg, out, describe, progress)
+    result = train(trainer, batches, train_cfg, out, describe, progress,
+                   write_checkpoint=save_checkpoint)
     if planner_report is not None:
         write_atomic(out / "training" / "planner.json",
                      (json.dumps(planner_report, indent=2) + "\n").encode())
