@@ -5,6 +5,8 @@
 #  2. create .venv at the repository root;
 #  3. install the CPU build of torch first (never a CUDA build), then rmbench with its test,
 #     training, text-encoder and planner-backend extras.
+# Packages come from pip's configured index (pip config, PIP_INDEX_URL, ...). torch alone can
+# come from another: RMBENCH_TORCH_INDEX=URL (README.md, set-up).
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -33,20 +35,34 @@ fi
 [ -x .venv/bin/python ] || "$PYTHON" -m venv .venv
 PIP=(.venv/bin/python -m pip --disable-pip-version-check)
 
-# torch first and pinned: a later requirement that names torch then finds it satisfied
-# instead of pulling the registry's newest (CUDA) build.
-if ! .venv/bin/python -c "import torch, sys; sys.exit(torch.__version__.split('+')[0] != '$TORCH_VERSION')" 2>/dev/null; then
-  echo "[install] torch==$TORCH_VERSION (CPU)"
-  # A CPU wheel on pip's find-links path (as on these machines) if there is one; otherwise
-  # PyTorch's CPU-only index. Never plain PyPI, whose Linux torch is the CUDA build.
+# torch first, pinned and the CPU build: a later requirement that names torch then finds it
+# satisfied instead of pulling the index's newest (CUDA) build.
+torch_ok() {
+  .venv/bin/python -c "import sys, torch
+sys.exit(torch.__version__.split('+')[0] != '$TORCH_VERSION' or bool(torch.version.cuda))" 2>/dev/null
+}
+if ! torch_ok; then
   tmp="$(mktemp -d)"
-  if "${PIP[@]}" download -q --no-deps --no-index "torch==$TORCH_VERSION" -d "$tmp" 2>/dev/null; then
+  if [ -n "${RMBENCH_TORCH_INDEX:-}" ]; then
+    # The index the user named (PyTorch's CPU-only wheel index, say) serves torch alone; its
+    # dependencies then come from pip's configured index. --force-reinstall replaces a CUDA
+    # build of the same version, which pip would otherwise count as satisfying the pin.
+    echo "[install] torch==$TORCH_VERSION (CPU) from RMBENCH_TORCH_INDEX=$RMBENCH_TORCH_INDEX"
+    "${PIP[@]}" install -q --no-deps --force-reinstall --index-url "$RMBENCH_TORCH_INDEX" \
+      "torch==$TORCH_VERSION"
+    "${PIP[@]}" install -q "torch==$TORCH_VERSION"
+  elif "${PIP[@]}" download -q --no-deps --no-index "torch==$TORCH_VERSION" -d "$tmp" 2>/dev/null; then
+    # a CPU wheel on pip's find-links path (as on these machines)
+    echo "[install] torch==$TORCH_VERSION (CPU) from a local wheel"
     "${PIP[@]}" install -q "$tmp"/torch-*.whl
   else
-    "${PIP[@]}" install -q "torch==$TORCH_VERSION" --index-url https://download.pytorch.org/whl/cpu \
-      --extra-index-url https://pypi.org/simple
+    echo "[install] torch==$TORCH_VERSION from pip's configured index"
+    "${PIP[@]}" install -q "torch==$TORCH_VERSION"
   fi
   rm -rf "$tmp"
+  # On Linux the default index's torch is the CUDA build: say how to get the CPU one.
+  torch_ok || { echo "[install] pip's index gave no CPU build of torch==$TORCH_VERSION; set" \
+    "RMBENCH_TORCH_INDEX to a CPU wheel index (README.md, set-up) and re-run" >&2; exit 1; }
 fi
 echo "[install] rmbench[test,train,text,vlm]"
 "${PIP[@]}" install -q -e ".[test,train,text,vlm]"
