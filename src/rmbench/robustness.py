@@ -47,6 +47,9 @@ class SigmaResult:
         return {**self.noise.to_dict(), "episodes": len(self.episodes),
                 "successes": self.successes, "success_rate": self.success_rate,
                 "expert_raised": self.raised, "failures": dict(self.reasons().most_common()),
+                "longest_success_steps": max((r.steps for r in self.episodes if r.success),
+                                             default=0),
+                "step_limit": self.episodes[0].step_limit if self.episodes else 0,
                 "failed_seeds": [r.seed for r in self.episodes if not r.success]}
 
 
