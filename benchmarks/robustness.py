@@ -86,6 +86,16 @@ def render(cells: dict, columns: list[tuple[str, float]]) -> str:
             mark = "*" if c["success_rate"] < FLOOR.get((kind, sigma), 0.0) else ""
             row.append(f"{100 * c['success_rate']:.0f}{mark} ({c['episodes']})")
         lines.append(f"| {task} | " + " | ".join(row) + " |")
+    clean = [(t, cells[(t, "white", 0.0)]) for t in tasks if (t, "white", 0.0) in cells]
+    if clean and all("longest_success_steps" in c for _, c in clean):
+        lines += ["", "## Without noise: the step limits' margin", "",
+                  "| task | success | longest successful episode | step limit | margin |",
+                  "|---|---|---|---|---|"]
+        for task, c in clean:
+            longest = c["longest_success_steps"]
+            margin = f"{c['step_limit'] / longest:.2f}x" if longest else "-"
+            lines.append(f"| {task} | {c['successes']}/{c['episodes']} | {longest} steps | "
+                         f"{c['step_limit']} | {margin} |")
     raised = sum(c["expert_raised"] for c in cells.values())
     episodes = sum(c["episodes"] for c in cells.values())
     lines += ["", f"Episodes in the table: {episodes}; episodes in which an expert raised: "
