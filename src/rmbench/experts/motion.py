@@ -38,6 +38,9 @@ FEEDBACK_LIMIT = 0.15  # rad: never correct more than this per joint
 
 ALIGN_TOL = 0.003  # m: line up until the held piece is this close to its target (xy)
 ALIGN_STEPS = 3  # corrections at most
+# Share of the held piece's offset from its target corrected per step on the way down. The
+# piece trails the command by a step or two (the servos' lag), so a larger share overshoots.
+DESCENT_GAIN = 0.3
 PLACE_TOL = 0.02  # m: a piece set down farther than this from its target is set down again
 ATTEMPTS = 3  # grasps (and set-downs) of one piece before the expert gives up
 
@@ -226,25 +229,30 @@ class Motion:
               locate: Callable[[], tuple[np.ndarray, float]] | None = None) -> Actions:
         """Carry the held object over ``target`` (table xy, z of the surface), set it down, open
         (to ``opening``), and rise. With ``locate`` (the held piece's grasp centre, live), the
-        hand shifts on the way down until the piece itself, not the hand, is over the target:
-        that absorbs an off-centre grasp and a drifting arm."""
+        hand is steered on the way down so that the piece itself, not the hand, arrives over
+        the target: that absorbs an off-centre grasp and a drifting arm."""
         target = np.asarray(target, float)
         release = np.array([target[0], target[1],
                             target[2] + FINGER_TIP_BELOW_SITE + 0.010 + 0.004])
         yield from self.move_to(side, release + (0, 0, hover), yaw)
         if locate is not None:
-            # Lined up at the hover height and again halfway down, where the piece still
-            # clears what stands at the target (a cube under a cover, a holder's plates).
+            # Lined up at the hover height, then kept over the target all the way down: each
+            # step the piece's own offset nudges the hand (a drift changes within the descent).
             aim = release.copy()
-            for height in (hover, hover / 2):
-                yield from self.move_to(side, aim + (0, 0, height), yaw, FINE_SPEED)
-                for _ in range(ALIGN_STEPS):
-                    yield from self.hold(2)  # let the piece stop swinging before looking
-                    error = target[:2] - locate()[0][:2]
-                    if np.linalg.norm(error) <= ALIGN_TOL:
-                        break
-                    aim[:2] += error
-                    yield from self.move_to(side, aim + (0, 0, height), yaw, FINE_SPEED)
+            for _ in range(ALIGN_STEPS):
+                yield from self.hold(2)  # let the piece stop swinging before looking
+                error = target[:2] - locate()[0][:2]
+                if np.linalg.norm(error) <= ALIGN_TOL:
+                    break
+                aim[:2] += error
+                yield from self.move_to(side, aim + (0, 0, hover), yaw, FINE_SPEED)
+            quat, q = top_down_quat(yaw), self.joints(side)
+            n = max(int(np.ceil(hover / (FINE_SPEED * DT) * 1.5)), 2)
+            for s in min_jerk(n):
+                aim[:2] += DESCENT_GAIN * (target[:2] - locate()[0][:2])
+                q, _ = self.ik.solve(side, aim + (0, 0, hover * (1 - s)), quat, seed=q)
+                self.cmd[self._slice(side)] = q
+                yield self.cmd.copy()
             release = aim
         yield from self.move_to(side, release, yaw, FINE_SPEED)
         yield from self.gripper(side, opening, 6)
