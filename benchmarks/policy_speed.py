@@ -130,8 +130,8 @@ def main() -> None:
     torch.set_num_threads(1)  # one core, as the inference target says
     results = {"mem0": closed_loop(policy, frames, args.steps)}
     results["mem0"]["params"] = sum(p.numel() for p in model.executor.parameters())
-    imgs = policy.images(frames[0])
-    planner_cams = [imgs[i] for i in policy.planner_cams]
+    imgs = policy.inputs(frames[0])
+    planner_cams = policy.planner_inputs(imgs)
     with torch.no_grad():  # the planner with a full key memory of 8 finished subtasks
         policy.first = model.planner.embed(planner_cams)
         policy.keys = [(k % len(subtasks), model.planner.embed(planner_cams)[0]) for k in range(8)]

@@ -231,3 +231,86 @@ def test_train_cli_for_baselines(dataset, tmp_path, capsys):
     assert "unknown config field" in capsys.readouterr().err
     assert main(base + ["--steps", "2", "--batch-size", "2"]) == 2  # 3 cameras asked, 2 recorded
     assert "no ['right_wrist'] camera" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ the state observation
+def state_cfg(name):
+    return replace(BASELINES[name][0], observation="state", state_hidden=32)
+
+
+@pytest.fixture(scope="module", params=sorted(BASELINES))
+def state_ckpt(request, dataset, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ckpt") / f"{request.param}_state"
+    train_tiny(request.param, dataset, out, cfg=state_cfg(request.param))
+    return request.param, out
+
+
+def test_observation_rule():
+    from types import SimpleNamespace
+
+    from rmbench.policies.observation import choose
+
+    both = SimpleNamespace(root="d", cameras=["head"], state_names=["x"])
+    assert choose("auto", both) == "pixels" and choose("state", both) == "state"
+    assert choose("auto", SimpleNamespace(root="d", cameras=[], state_names=["x"])) == "state"
+    with pytest.raises(ValueError, match="no observation.environment_state"):
+        choose("state", SimpleNamespace(root="d", cameras=["head"], state_names=None))
+    with pytest.raises(ValueError, match="no camera videos"):
+        choose("pixels", SimpleNamespace(root="d", cameras=[], state_names=["x"]))
+    with pytest.raises(ValueError, match="observation must be one of auto, pixels, state"):
+        DPConfig(observation="depth")
+    # a checkpoint from before the field reads pixels
+    assert not ACTConfig.from_dict({}).reads_state and DPConfig().step_tokens == 3
+
+
+# (steps, loss ratio): ACT's L1 falls fast; DP's noise loss slowly, as with pixels (at these
+# widths and 60 steps: 1.11 -> 1.00 from pixels, 1.15 -> 1.00 from the state)
+STATE_FIT = {"dp": (60, 0.95), "act": (40, 0.3)}
+
+
+@pytest.mark.parametrize("name", sorted(BASELINES))
+def test_state_baseline_trains_without_frames(name, dataset, tmp_path, monkeypatch):
+    from rmbench.data import reader
+    from rmbench.data.torch_dataset import FrameCache
+
+    def boom(*args, **kw):
+        raise AssertionError("a state policy read a camera frame")
+
+    monkeypatch.setattr(reader, "decode_video", boom)
+    monkeypatch.setattr(FrameCache, "frames", boom)
+    steps, ratio = STATE_FIT[name]
+    train_tiny(name, dataset, tmp_path / "s", steps=steps, cfg=state_cfg(name), batch_size=16,
+               save_every=steps)
+    rows = [float(r["loss"]) for r in csv.DictReader(open(tmp_path / "s" / "training" / "loss.csv"))]
+    assert np.mean(rows[-10:]) < ratio * np.mean(rows[:5]), (rows[:5], rows[-10:])
+
+
+def test_state_checkpoint_round_trip_and_the_pixel_observation_error(state_ckpt):
+    name, path = state_ckpt
+    policy_cls = BASELINES[name][2]
+    env = make("observe_and_pickup", obs_type="environment_state_agent_pos")
+    runs = [np.stack(roll_out(env, policy_cls(str(path), env), seed=100001, steps=6)[1])
+            for _ in range(2)]
+    env.close()
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert runs[0].shape[1] == 14 and np.isfinite(runs[0]).all()
+    env = make("observe_and_pickup", cameras=("head", "left_wrist"), width=64, height=48)
+    policy = policy_cls(str(path), env)
+    assert policy.cameras == ()
+    obs, _ = env.reset(seed=100001)
+    with pytest.raises(ValueError, match="no 'environment_state'.*environment_state_agent_pos"):
+        policy.act(obs)
+    env.close()
+
+
+def test_state_baseline_through_the_evaluation_harness(state_ckpt, tmp_path):
+    from rmbench.eval import EvalConfig, evaluate
+    from rmbench.eval.harness import read_records
+    from rmbench.policies.registry import env_options
+
+    name, path = state_ckpt
+    assert env_options(f"{name}:{path}") == {"obs_type": "environment_state_agent_pos"}
+    evaluate(EvalConfig(("observe_and_pickup",), f"{name}:{path}", tmp_path / "e", episodes=1,
+                        video="none", progress=False, seed_cache=tmp_path / "seeds"))
+    (rec,) = read_records(tmp_path / "e" / "observe_and_pickup" / "episodes.jsonl")
+    assert rec["reason"] in ("success", "task_failure", "timeout"), rec

@@ -59,7 +59,7 @@ def test_anchor_is_the_first_frame_of_the_subtask_and_stays(mn_ckpt):
     obs, info = env.reset(seed=100000)
     policy.reset(info["instruction"], {"seed": 100000})
     ex = policy.model.executor
-    first_tokens, _ = ex.encode(policy.images(obs))
+    first_tokens, _ = ex.encode(policy.inputs(obs))
     anchors = []
     for _ in range(5):
         policy.act(obs)
@@ -68,10 +68,10 @@ def test_anchor_is_the_first_frame_of_the_subtask_and_stays(mn_ckpt):
     assert torch.allclose(anchors[0][0], first_tokens[0].detach())
     assert all(torch.equal(a, anchors[0]) for a in anchors)
     # a subtask ends: the next step's frame becomes the anchor and the window empties
-    policy.subtask_ended(policy.images(obs))
+    policy.subtask_ended(policy.inputs(obs))
     assert len(policy.keys) == 1
     policy.act(obs)
-    tokens, _ = ex.encode(policy.images(obs))
+    tokens, _ = ex.encode(policy.inputs(obs))
     assert torch.allclose(policy.memory.anchor[0], tokens[0])
     assert int(policy.memory.valid.sum()) <= 1
     env.close()
@@ -290,3 +290,87 @@ def test_open_loop_error_walks_the_agent_over_recorded_frames(mn_ckpt, mn_datase
     assert np.isfinite(mem0["error"]) and mem0["error"] != mem0["hold_error"]
     with pytest.raises(ValueError, match="episode 5 is not in"):
         open_loop_error("noop", str(mn_dataset), [5])
+
+
+# ------------------------------------------------------------------ the state observation
+TINY_STATE = replace(TINY, observation="state", state_hidden=32)
+
+
+@pytest.fixture
+def no_frames(monkeypatch):
+    """Any frame decoded or read from the frame cache fails the test."""
+    from rmbench.data import reader
+    from rmbench.data.torch_dataset import FrameCache
+
+    def boom(*args, **kw):
+        raise AssertionError("a state policy read a camera frame")
+
+    monkeypatch.setattr(reader, "decode_video", boom)
+    monkeypatch.setattr(FrameCache, "frames", boom)
+
+
+@pytest.fixture(scope="module")
+def mn_state_ckpt(mn_dataset, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ckpt") / "mn_state"
+    train_tiny(mn_dataset, out, cfg=TINY_STATE)
+    return out
+
+
+def test_state_executor_trains_without_frames(dataset, tmp_path, no_frames):
+    import csv
+
+    train_tiny(dataset, tmp_path / "s", steps=60, cfg=TINY_STATE, batch_size=16, save_every=60)
+    rows = [float(r["loss/action"]) for r in csv.DictReader(open(tmp_path / "s" / "training" / "loss.csv"))]
+    assert np.mean(rows[-10:]) < 0.8 * np.mean(rows[:5]), (rows[:5], rows[-10:])
+    describe = json.loads((tmp_path / "s" / "config.json").read_text())
+    assert describe["config"]["observation"] == "state"
+    assert describe["state_names"] == Dataset(dataset).state_names
+
+
+def test_state_planner_and_memories_hold_state_embeddings(mn_state_ckpt, mn_dataset):
+    report = json.loads((mn_state_ckpt / "training" / "planner.json").read_text())
+    assert report["decisions"] == 2 * (len(Dataset(mn_dataset).subtasks) + 1)
+    env = make("press_button", obs_type="environment_state_agent_pos")
+    policy = Mem0Policy(f"{mn_state_ckpt}?ablation=gt_classifier", env)
+    assert policy.cameras == ()  # the env need not render
+    obs, info = env.reset(seed=100000)
+    policy.reset(info["instruction"], {"seed": 100000})
+    model, inputs = policy.model, policy.inputs(obs)
+    assert [x.shape for x in inputs] == [(1, len(Dataset(mn_dataset).state_names)), (1, 14)]
+    policy.act(obs)
+    tokens, _ = model.executor.encode(inputs)
+    assert policy.memory.anchor.shape == (1, TINY_STATE.state_tokens, TINY_STATE.dim)
+    assert torch.allclose(policy.memory.anchor[0], tokens[0])  # the subtask's first step
+    torch.testing.assert_close(policy.first, model.planner.embed(inputs))  # o_0 for the planner
+    obs, *_ = env.step(np.asarray(obs["agent_pos"]))
+    policy.subtask_ended(policy.inputs(obs))  # a key memory entry: the end frame's state
+    torch.testing.assert_close(policy.keys[-1][1], model.planner.embed(policy.inputs(obs))[0])
+    env.close()
+
+
+def test_state_checkpoint_round_trip_and_the_pixel_observation_error(mn_state_ckpt):
+    env = make("press_button", obs_type="environment_state_agent_pos")
+    runs_ = [np.stack(roll_out(env, Mem0Policy(str(mn_state_ckpt), env), seed=100001, steps=6)[1])
+             for _ in range(2)]
+    env.close()
+    np.testing.assert_array_equal(runs_[0], runs_[1])
+    assert runs_[0].shape == (6, 14) and np.isfinite(runs_[0]).all()
+    env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
+    policy = Mem0Policy(str(mn_state_ckpt), env)
+    obs, _ = env.reset(seed=100001)
+    with pytest.raises(ValueError, match="no 'environment_state'.*environment_state_agent_pos"):
+        policy.act(obs)
+    env.close()
+
+
+def test_state_mem0_through_the_evaluation_harness(mn_state_ckpt, tmp_path):
+    from rmbench.eval import EvalConfig, evaluate
+    from rmbench.eval.harness import read_records
+    from rmbench.policies.registry import env_options
+
+    spec = f"mem0:{mn_state_ckpt}?ablation=gt_classifier"
+    assert env_options(spec) == {"obs_type": "environment_state_agent_pos"}
+    evaluate(EvalConfig(("press_button",), spec, tmp_path / "e", episodes=1, video="none",
+                        progress=False, seed_cache=tmp_path / "seeds"))
+    (rec,) = read_records(tmp_path / "e" / "press_button" / "episodes.jsonl")
+    assert rec["reason"] in ("success", "task_failure", "timeout"), rec

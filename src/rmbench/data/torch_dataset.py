@@ -71,12 +71,16 @@ class DemoDataset(torch.utils.data.Dataset):
     With ``history`` n > 1 the state and images are the last n frames, oldest first: state
     (n, 14) and images (n, 3, H, W), the episode's first frame repeated before its start (an
     observation window, as Diffusion Policy reads).
+
+    With ``environment_state`` an item also holds ``observation.environment_state`` (D,) float32
+    (the task's state observation; (n, D) with a history), for policies that read it; a dataset
+    collected before the column existed raises ValueError.
     """
 
     def __init__(self, root: str | Path | Dataset, *, chunk: int = 30,
                  cameras: list[str] | None = None, image_size: tuple[int, int] | None = None,
                  episodes: list[int] | None = None, cache_dir: str | Path | None = None,
-                 stride: int = 1, history: int = 1):
+                 stride: int = 1, history: int = 1, environment_state: bool = False):
         if stride < 1 or history < 1:
             raise ValueError(f"stride and history must be at least 1, got {stride} and {history}")
         self.stride, self.history = stride, history
@@ -88,6 +92,9 @@ class DemoDataset(torch.utils.data.Dataset):
         self.episode_ids = list(range(self.ds.num_episodes) if episodes is None else episodes)
         self.cache = FrameCache(self.ds, image_size, cache_dir)
         self.low_dim = [self.ds.episode(e, cameras=[]) for e in self.episode_ids]
+        self.environment_state = environment_state
+        if environment_state and self.ds.state_names is None:
+            raise ValueError(f"{self.ds.root} has no {L.ENV_STATE} (collected before it existed)")
         self.task_index = [self.ds.instructions.index(ep.instruction) for ep in self.low_dim]
         lengths = np.array([len(ep) for ep in self.low_dim], dtype=np.int64)
         self.starts = np.concatenate([[0], np.cumsum(lengths)])
@@ -121,6 +128,8 @@ class DemoDataset(torch.utils.data.Dataset):
             # the first frame a walk with this stride visits (EpisodeOrderSampler's phase)
             "episode_start": torch.tensor(t < self.stride),
         }
+        if self.environment_state:
+            item[L.ENV_STATE] = torch.from_numpy(ep.environment_state[seen].copy())
         for cam in self.cameras:
             frame = np.array(self.cache.frames(self.episode_ids[k], cam)[seen])
             item[L.image_key(cam)] = torch.from_numpy(frame).movedim(-1, -3).contiguous()

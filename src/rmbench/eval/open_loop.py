@@ -33,10 +33,12 @@ def open_loop_error(spec: str, dataset: str, episodes: list[int]) -> dict[str, A
     if missing:
         raise ValueError(f"{spec} reads camera {missing[0]!r}, which {dataset} does not hold")
     size = tuple(policy.cfg.image_size) if cameras else None
+    with_state = ds.state_names is not None  # what a state policy reads (else: its ValueError)
     seeds = [int(row["rmbench/seed"]) for row in ds.episodes]
     per_episode = []
     for e in episodes:
-        frames = DemoDataset(ds, chunk=1, cameras=list(cameras), image_size=size, episodes=[e])
+        frames = DemoDataset(ds, chunk=1, cameras=list(cameras), image_size=size, episodes=[e],
+                             environment_state=with_state)
         policy.reset("", {"seed": seeds[e]})
         err, hold = [], []
         for t in range(len(frames)):
@@ -44,6 +46,8 @@ def open_loop_error(spec: str, dataset: str, episodes: list[int]) -> dict[str, A
             state = item[L.STATE].numpy().astype(np.float64)
             obs = {"agent_pos": state,
                    "pixels": {c: item[L.image_key(c)].permute(1, 2, 0).numpy() for c in cameras}}
+            if with_state:
+                obs["environment_state"] = item[L.ENV_STATE].numpy().astype(np.float64)
             recorded = item[L.ACTION][0].numpy().astype(np.float64)
             err.append(np.abs(np.asarray(policy.act(obs), np.float64) - recorded).mean())
             hold.append(np.abs(state - recorded).mean())

@@ -10,7 +10,7 @@ from typing import Any
 
 from rmbench.envs.registration import make
 from rmbench.eval.episode import run_policy_episode
-from rmbench.policies.registry import make_policy, parse_spec
+from rmbench.policies.registry import env_options, make_policy
 
 _WORKER: dict[str, Any] = {}
 
@@ -19,10 +19,8 @@ def episode_job(task: str, policy: str, instructions: str, seed: int, video: boo
     key = (task, policy, instructions)
     if _WORKER.get("key") != key:
         close_worker()
-        entry, _ = parse_spec(policy)
-        kwargs = {"render": False} if entry.cameras == () else (
-            {"cameras": entry.cameras} if entry.cameras else {})
-        env = make(task, instructions=instructions, **kwargs)
+        # the observation the policy reads (a state checkpoint: environment_state_agent_pos)
+        env = make(task, instructions=instructions, **env_options(policy))
         _WORKER.update(key=key, env=env, policy=make_policy(policy, env))
     return run_policy_episode(_WORKER["env"], _WORKER["policy"], seed, video)
 

@@ -3,6 +3,8 @@ random and no-op floors, and open-loop replay of a dataset's actions (a determin
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -84,6 +86,19 @@ register_policy("replay", "replay a dataset's recorded actions on its own seeds"
                 needs_argument=True, cameras=())(lambda arg, env: ReplayPolicy(arg, env))
 
 
+def checkpoint_obs_type(arg: str | None) -> str:
+    """The env observation a learned policy's checkpoint reads, from its config.json (no torch
+    import): the state observation for one trained with observation "state", else pixels. An
+    unreadable checkpoint reads pixels here; building the policy then says what is wrong."""
+    try:
+        config = json.loads((Path((arg or "").partition("?")[0]) / "config.json").read_text())
+        state = config["config"].get("observation") == "state"
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        state = False
+    # rmbench.make's obs_type values (rmbench.envs.env.OBS_TYPES)
+    return "environment_state_agent_pos" if state else "pixels_agent_pos"
+
+
 def _mem0(arg, env):
     from rmbench.policies.mem0.agent import Mem0Policy  # torch only when asked for
 
@@ -91,7 +106,7 @@ def _mem0(arg, env):
 
 
 register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&execute=N&flow_steps=N]",
-                needs_argument=True)(_mem0)
+                needs_argument=True, obs_type=checkpoint_obs_type)(_mem0)
 
 
 def _dp(arg, env):
@@ -107,6 +122,6 @@ def _act(arg, env):
 
 
 register_policy("dp", "Diffusion Policy from a checkpoint: dp:CKPT[?execute=N&ddim_steps=N]",
-                needs_argument=True)(_dp)
+                needs_argument=True, obs_type=checkpoint_obs_type)(_dp)
 register_policy("act", "ACT from a checkpoint: act:CKPT[?temporal_ensemble=M&execute=N]",
-                needs_argument=True)(_act)
+                needs_argument=True, obs_type=checkpoint_obs_type)(_act)

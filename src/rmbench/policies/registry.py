@@ -13,11 +13,15 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.metadata import EntryPoints, entry_points
+from typing import Any
 
 from rmbench.policies.base import Policy
 
 # factory(argument or None, env) -> policy
 PolicyFactory = Callable[[str | None, object], Policy]
+# argument or None -> the env observation the policy reads (rmbench.make's obs_type)
+ObsType = Callable[[str | None], str]
+PIXELS_OBS_TYPE = "pixels_agent_pos"  # rmbench.make's default
 
 
 class UnknownPolicyError(ValueError):
@@ -32,17 +36,20 @@ class PolicyEntry:
     needs_argument: bool = False
     # cameras the policy reads: None = the station's default set, () = none (no rendering)
     cameras: tuple[str, ...] | None = None
+    # the observation it reads, from its argument (a checkpoint trained on the state reads
+    # "environment_state_agent_pos"); None = pixels_agent_pos
+    obs_type: ObsType | None = None
 
 
 POLICIES: dict[str, PolicyEntry] = {}
 
 
 def register_policy(name: str, help: str, needs_argument: bool = False,
-                    cameras: tuple[str, ...] | None = None):
+                    cameras: tuple[str, ...] | None = None, obs_type: ObsType | None = None):
     def wrap(factory: PolicyFactory) -> PolicyFactory:
         if name in POLICIES:
             raise ValueError(f"policy {name!r} is already registered")
-        POLICIES[name] = PolicyEntry(name, factory, help, needs_argument, cameras)
+        POLICIES[name] = PolicyEntry(name, factory, help, needs_argument, cameras, obs_type)
         return factory
 
     return wrap
@@ -63,6 +70,19 @@ def parse_spec(spec: str) -> tuple[PolicyEntry, str | None]:
     if not entry.needs_argument and sep:
         raise UnknownPolicyError(f"policy {name!r} takes no argument, got {spec!r}")
     return entry, (arg or None)
+
+
+def env_options(spec: str) -> dict[str, Any]:
+    """``rmbench.make`` options for an env that ``spec`` can act in: the observation it
+    declares (``obs_type``) and the cameras it reads; nothing is rendered for a policy that
+    reads no camera."""
+    entry, arg = parse_spec(spec)
+    obs_type = entry.obs_type(arg) if entry.obs_type is not None else PIXELS_OBS_TYPE
+    if obs_type != PIXELS_OBS_TYPE:
+        return {"obs_type": obs_type}
+    if entry.cameras == ():
+        return {"render": False}
+    return {"cameras": entry.cameras} if entry.cameras else {}
 
 
 def make_policy(spec: str, env) -> Policy:

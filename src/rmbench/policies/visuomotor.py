@@ -3,11 +3,15 @@ step's plumbing, training on uniformly drawn frames, and the closed loop over a 
 observation window.
 
 A model here implements
-    ``observe(images, state) -> features``   one control step's observation, encoded once
+    ``observe(inputs, state) -> features``   one control step's observation, encoded once:
+                                             ``inputs`` the per-camera images, or with
+                                             observation "state" [environment_state, state]
     ``predict(window, state, generator) -> (B, H, A)``   normalised action chunk from the last
                                                          ``obs_steps`` features, oldest first
-and holds ``encoders`` (its CNNs) and ``normalizer``. Nothing carries over beyond the window:
-that is the point of these baselines on a memory benchmark.
+and holds ``encoders`` (its CNNs, or the state MLP) and ``normalizer``; it is built as
+``model_cls(cfg, state_dim)`` (``state_dim`` the environment state's length, 0 for pixels).
+Nothing carries over beyond the window: that is the point of these baselines on a memory
+benchmark.
 """
 
 from __future__ import annotations
@@ -28,8 +32,16 @@ from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config, save_checkpoint
 from rmbench.policies.config import PolicyConfig, parse_argument
 from rmbench.policies.nn.normalize import Normalizer
-from rmbench.policies.nn.vision import color_jitter
-from rmbench.policies.observation import image_tensors, state_tensor
+from rmbench.policies.nn.state import StateEncoder
+from rmbench.policies.nn.vision import CameraEncoders, color_jitter
+from rmbench.policies.observation import (
+    STATE,
+    check_observation,
+    choose,
+    image_tensors,
+    state_inputs,
+    state_tensor,
+)
 from rmbench.tasks import get_task
 from rmbench.training.batches import batch_stream
 from rmbench.training.loop import TrainConfig, train
@@ -41,6 +53,19 @@ ACTION_DIM = 14
 class VisuomotorConfig(PolicyConfig):
     """Fields every baseline has; subclasses add theirs and may change these defaults."""
 
+    observation: str = "auto"
+    """What the policy reads. "pixels": the cameras below, each through its own CNN. "state":
+    observation.environment_state (normalised with the dataset's statistics) and the joint
+    state through an MLP (``state_tokens`` tokens of width ``dim`` in place of the camera
+    features); evaluation then runs the env with obs_type="environment_state_agent_pos".
+    "auto" (the default) is settled by training from the dataset: "pixels" if it has camera
+    videos, else "state"; ask for the state of a dataset with videos with
+    --set observation=state. The checkpoint stores the choice (one from before this field
+    reads as pixels)."""
+    state_tokens: int = 2
+    """With observation "state": tokens per step (as cameras are with pixels)."""
+    state_hidden: int = 256
+    """With observation "state": hidden width of the state encoder's two layers."""
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
     """Cameras read, each through its own CNN (the same encoder Mem-0 uses)."""
     image_size: tuple[int, int] = (96, 128)
@@ -71,12 +96,34 @@ class VisuomotorConfig(PolicyConfig):
 
     def __post_init__(self):
         super().__post_init__()
-        if not self.cameras:
+        check_observation(self.observation)
+        if self.state_tokens < 1 or self.state_hidden < 1:
+            raise ValueError("state_tokens and state_hidden must be >= 1")
+        if not self.cameras and not self.reads_state:
             raise ValueError("a visuomotor policy needs at least one camera")
         if self.obs_steps < 1 or self.horizon < 1:
             raise ValueError("obs_steps and horizon must be >= 1")
         if not 1 <= self.execute <= self.horizon:
             raise ValueError(f"execute ({self.execute}) must be in [1, horizon={self.horizon}]")
+
+    @property
+    def reads_state(self) -> bool:
+        """Reads the state observation ("auto", unsettled, reads pixels)."""
+        return self.observation == STATE
+
+    @property
+    def step_tokens(self) -> int:
+        """Features one step's observation becomes: one per camera, or ``state_tokens``."""
+        return self.state_tokens if self.reads_state else len(self.cameras)
+
+
+def observation_encoder(cfg: VisuomotorConfig, state_dim: int, keypoints: int,
+                        pooled: bool = True) -> nn.Module:
+    """The CNNs (one per camera; ``pooled=False``: feature maps) or, with observation "state",
+    the state MLP (``cfg.state_tokens`` tokens (B, n, cfg.dim))."""
+    if cfg.reads_state:
+        return StateEncoder(state_dim, cfg.dim, cfg.state_tokens, cfg.state_hidden)
+    return CameraEncoders(len(cfg.cameras), cfg.dim, cfg.encoder_channels, keypoints, pooled)
 
 
 class VisuomotorTrainer(nn.Module):
@@ -96,11 +143,15 @@ class VisuomotorTrainer(nn.Module):
         if cfg.obs_steps == 1:
             state = state[:, None]
         b, n = state.shape[:2]
-        images = []
-        for cam in cfg.cameras:
-            img = batch[L.image_key(cam)].reshape(b * n, *batch[L.image_key(cam)].shape[-3:])
-            images.append(color_jitter(img, self.generator, *cfg.jitter) if any(cfg.jitter) else img)
-        features = self.model.observe(images, state.reshape(b * n, -1))
+        if cfg.reads_state:
+            inputs = [batch[L.ENV_STATE].reshape(b * n, -1), state.reshape(b * n, -1)]
+        else:
+            inputs = []
+            for cam in cfg.cameras:
+                img = batch[L.image_key(cam)].reshape(b * n, *batch[L.image_key(cam)].shape[-3:])
+                inputs.append(color_jitter(img, self.generator, *cfg.jitter) if any(cfg.jitter)
+                              else img)
+        features = self.model.observe(inputs, state.reshape(b * n, -1))
         return features.reshape(b, n, *features.shape[1:])
 
     def target(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -131,25 +182,36 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
                      trainer_cls: type[VisuomotorTrainer], dataset: str | Path, out: str | Path,
                      train_cfg: TrainConfig, progress: bool = True, workers: int = 0
                      ) -> dict[str, Any]:
-    """Train a baseline on uniformly drawn frames of one task's dataset: the model is built
-    from ``cfg`` under the run's seed, its normaliser set from the dataset, then wrapped by the
-    trainer (an EMA copy then starts from the right statistics)."""
+    """Train a baseline on uniformly drawn frames of one task's dataset (their camera frames
+    or their state, ``cfg.observation``): the model is built from ``cfg`` under the run's seed,
+    its normalisers set from the dataset, then wrapped by the trainer (an EMA copy then starts
+    from the right statistics)."""
     ds = Dataset(dataset)
     task = get_task(ds.task)
+    cfg = replace(cfg, observation=choose(cfg.observation, ds))
     describe = {"policy": policy, "config": cfg.to_dict(), "task": task.name, "tmc": task.tmc,
                 "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
                             "frames": ds.num_frames}}
-    missing = sorted(set(cfg.cameras) - set(ds.cameras))
+    if cfg.reads_state:
+        describe["state_names"] = ds.state_names
+    missing = [] if cfg.reads_state else sorted(set(cfg.cameras) - set(ds.cameras))
     if missing:
         raise ValueError(f"{dataset} has no {missing} camera(s) (has {list(ds.cameras)}); "
                          f"train with --set 'cameras={json.dumps(list(ds.cameras))}'")
     torch.manual_seed(train_cfg.seed)
-    model = model_cls(cfg)
+    model = model_cls(cfg, len(ds.state_names or ()) if cfg.reads_state else 0)
     norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
     model.normalizer.load_state_dict(norm.state_dict())
+    if cfg.reads_state:
+        from rmbench.data.stats import from_json
+
+        stats = from_json(json.loads((ds.root / L.STATS).read_text()))
+        model.encoders.set_stats(stats, L.ENV_STATE, L.STATE)
     trainer = trainer_cls(model, train_cfg.seed)
-    frames = DemoDataset(ds, chunk=cfg.horizon, cameras=list(cfg.cameras),
-                         image_size=cfg.image_size, history=cfg.obs_steps)
+    frames = DemoDataset(ds, chunk=cfg.horizon,
+                         cameras=[] if cfg.reads_state else list(cfg.cameras),
+                         image_size=cfg.image_size, history=cfg.obs_steps,
+                         environment_state=cfg.reads_state)
 
     def batches(start: int, rank: int, world: int):
         sampler = RandomFrameSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
@@ -176,7 +238,7 @@ class VisuomotorPolicy(BasePolicy):
             cfg = replace(self.config_cls.from_dict(describe["config"]), **overrides)
         except (TypeError, ValueError) as err:
             raise CheckpointError(f"{path}: {err}") from None
-        model = self.model_cls(cfg)
+        model = self.model_cls(cfg, len(describe.get("state_names") or ()))
         load_weights(path, model, describe["step"])
         if env is not None and type(env.unwrapped.task).name != describe["task"]:
             raise CheckpointError(f"{path} was trained on {describe['task']}, not "
@@ -192,7 +254,8 @@ class VisuomotorPolicy(BasePolicy):
 
     def _setup(self, model: nn.Module, describe: dict[str, Any]) -> None:
         self.model, self.cfg, self.describe = model.eval(), model.cfg, describe
-        self.cameras = self.cfg.cameras
+        # the cameras it reads: none for a state checkpoint (its env need not render)
+        self.cameras = () if self.cfg.reads_state else self.cfg.cameras
         self.reset("", {})
 
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
@@ -204,12 +267,18 @@ class VisuomotorPolicy(BasePolicy):
     @torch.no_grad()
     def act(self, observation: dict[str, Any]) -> np.ndarray:
         state = state_tensor(observation)
-        features = self.model.observe(image_tensors(observation, self.cfg.cameras,
-                                                    self.cfg.image_size), state)
+        features = self.model.observe(self.inputs(observation), state)
         self.window = (self.window or [features] * self.cfg.obs_steps)[1:] + [features]
         action = self.schedule(state)
         self.t += 1
         return action
+
+    def inputs(self, observation: dict[str, Any]) -> list[torch.Tensor]:
+        """What ``model.observe`` encodes: one image per camera, or [environment_state,
+        agent_pos] (a one-line ValueError if the observation lacks what the policy reads)."""
+        if self.cfg.reads_state:
+            return state_inputs(observation, self.model.encoders.state_dim)
+        return image_tensors(observation, self.cfg.cameras, self.cfg.image_size)
 
     def chunk(self, state: torch.Tensor) -> np.ndarray:
         """A new chunk (H, 14) of absolute joint targets from the current window."""

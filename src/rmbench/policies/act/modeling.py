@@ -2,7 +2,9 @@
 
     CVAE encoder (training only):  [CLS; state; a_1..a_k] -> mu, log sigma^2 -> z
     observation tokens:            every cell of every camera's CNN feature map, with 2-D
-                                   sinusoidal positions and a camera embedding
+                                   sinusoidal positions and a camera embedding (observation
+                                   "pixels"); or the state MLP's state_tokens tokens, each with
+                                   its own embedding (observation "state")
     encoder:                       [z; state; observation tokens]
     decoder:                       k learned queries cross-attend -> k actions
     loss:                          L1 over real (not padded) steps + beta KL(q(z) || N(0, I))
@@ -21,8 +23,7 @@ from rmbench.data import layout as L
 from rmbench.policies.act.config import ACTConfig
 from rmbench.policies.nn.embeddings import sincos_1d, sincos_2d
 from rmbench.policies.nn.normalize import Normalizer
-from rmbench.policies.nn.vision import CameraEncoders
-from rmbench.policies.visuomotor import ACTION_DIM, VisuomotorTrainer
+from rmbench.policies.visuomotor import ACTION_DIM, VisuomotorTrainer, observation_encoder
 
 
 def _encoder(cfg: ACTConfig) -> nn.TransformerEncoder:
@@ -33,12 +34,12 @@ def _encoder(cfg: ACTConfig) -> nn.TransformerEncoder:
 
 
 class ACTModel(nn.Module):
-    def __init__(self, cfg: ACTConfig):
+    def __init__(self, cfg: ACTConfig, state_dim: int = 0):
         super().__init__()
         self.cfg = cfg
         d = cfg.dim
-        self.encoders = CameraEncoders(len(cfg.cameras), d, cfg.encoder_channels, 0, pooled=False)
-        self.camera_embed = nn.Parameter(torch.randn(len(cfg.cameras), d) * 0.02)
+        self.encoders = observation_encoder(cfg, state_dim, 0, pooled=False)
+        self.camera_embed = nn.Parameter(torch.randn(cfg.step_tokens, d) * 0.02)
         self.normalizer = Normalizer(ACTION_DIM)
         # the CVAE encoder
         self.cls = nn.Parameter(torch.randn(d) * 0.02)
@@ -58,9 +59,11 @@ class ACTModel(nn.Module):
         self.queries = nn.Parameter(torch.randn(cfg.horizon, d) * 0.02)
         self.action_out = nn.Linear(d, ACTION_DIM)
 
-    def observe(self, images: list[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
-        """One step's observation tokens (B, cameras * h * w, dim)."""
-        maps = self.encoders(images)  # (B, C, d, h, w)
+    def observe(self, inputs: list[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
+        """One step's observation tokens (B, cameras * h * w, dim), or (B, state_tokens, dim)."""
+        if self.cfg.reads_state:
+            return self.encoders(inputs) + self.camera_embed
+        maps = self.encoders(inputs)  # (B, C, d, h, w)
         _, _, d, h, w = maps.shape
         tokens = maps.flatten(3).transpose(2, 3)  # (B, C, h * w, d)
         tokens = tokens + sincos_2d(h, w, d).to(tokens) + self.camera_embed[:, None]

@@ -2,7 +2,8 @@
 ``obs_steps`` steps form the global condition of a 1-D U-Net that predicts the noise of an
 action chunk; DDPM in training, DDIM at inference, EMA weights exported.
 
-    f_t      = [CNN_cam(o_t^cam) for each camera; state_t]
+    f_t      = [CNN_cam(o_t^cam) for each camera; state_t]     (observation "pixels")
+             = [MLP(env_state_t, state_t) as state_tokens; state_t]   (observation "state")
     cond     = [f_{t-1}; f_t]
     eps      = UNet(a_k, k / K, cond)          a_0 ~ DDIM(eps, 10 steps)
 """
@@ -18,24 +19,23 @@ from rmbench.policies.nn.diffusion import DDPMSchedule
 from rmbench.policies.nn.ema import EMA
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.unet1d import ConditionalUnet1D
-from rmbench.policies.nn.vision import CameraEncoders
-from rmbench.policies.visuomotor import ACTION_DIM, VisuomotorTrainer
+from rmbench.policies.visuomotor import ACTION_DIM, VisuomotorTrainer, observation_encoder
 
 
 class DiffusionPolicyModel(nn.Module):
-    def __init__(self, cfg: DPConfig):
+    def __init__(self, cfg: DPConfig, state_dim: int = 0):
         super().__init__()
         self.cfg = cfg
-        self.encoders = CameraEncoders(len(cfg.cameras), cfg.dim, cfg.encoder_channels, cfg.keypoints)
+        self.encoders = observation_encoder(cfg, state_dim, cfg.keypoints)
         self.normalizer = Normalizer(ACTION_DIM)
-        step_features = len(cfg.cameras) * cfg.dim + ACTION_DIM
+        step_features = cfg.step_tokens * cfg.dim + ACTION_DIM
         self.unet = ConditionalUnet1D(ACTION_DIM, cfg.obs_steps * step_features, cfg.down_dims,
                                       cfg.kernel, cfg.groups)
         self.schedule = DDPMSchedule(cfg.train_steps)
 
-    def observe(self, images: list[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
-        """One step: (B, cameras * dim + 14)."""
-        return torch.cat([self.encoders(images).flatten(1), self.normalizer.state(state)], -1)
+    def observe(self, inputs: list[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
+        """One step: (B, cameras (or state_tokens) * dim + 14)."""
+        return torch.cat([self.encoders(inputs).flatten(1), self.normalizer.state(state)], -1)
 
     def noise(self, x: torch.Tensor, k: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         return self.unet(x, k.float() / self.cfg.train_steps, cond)

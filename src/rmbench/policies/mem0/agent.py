@@ -1,6 +1,7 @@
 """``--policy mem0:CKPT[?ablation=A,B]``: Mem-0's closed loop.
 
-Every step: encode the frame; at a subtask's first step the anchor is set and the sliding
+Every step: encode the frame (or, for a checkpoint trained on the state, the observation's
+``environment_state`` and ``agent_pos``); at a subtask's first step the anchor is set and the sliding
 window emptied; c_t from the memories; a new chunk of H actions when the last D are used; the
 end classifier's debounced verdict (or, with gt_classifier, the simulator's subtask boundary).
 When a subtask ends its text and end frame go to key memory and the planner names the next
@@ -24,7 +25,7 @@ from rmbench.policies.mem0.config import TRAINED_ABLATIONS, Mem0Config
 from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import DONE
 from rmbench.policies.mem0.train import build_model, goal_text
-from rmbench.policies.observation import image_tensors, state_tensor
+from rmbench.policies.observation import image_tensors, state_inputs, state_tensor
 
 
 def load_mem0(path: str | Path, ablations: tuple[str, ...] = (),
@@ -67,7 +68,9 @@ class Mem0Policy(BasePolicy):
 
     def _setup(self, model, cfg: Mem0Config, describe: dict[str, Any], env) -> None:
         self.model, self.cfg, self.describe = model, cfg, describe
-        self.cameras = self.cfg.cameras
+        # the cameras it reads: none for a state checkpoint (its env need not render)
+        self.cameras = () if cfg.reads_state else cfg.cameras
+        self.state_dim = len(describe.get("state_names") or ())
         self.env = env.unwrapped if env is not None else None
         if self.cfg.gt_classifier and self.env is None:
             raise ValueError("gt_classifier reads the simulator's subtask boundary: it cannot be "
@@ -75,14 +78,15 @@ class Mem0Policy(BasePolicy):
         self.decompose = self.describe["tmc"] == "M(n)"
         self.goal = self.describe["executor_texts"].index(goal_text(self.describe["task"]))
         self.done = self.describe["planner_texts"].index(DONE)
-        self.planner_cams = [self.cfg.cameras.index(c) for c in self.cfg.planner_cameras]
+        self.planner_cams = (None if cfg.reads_state else
+                             [cfg.cameras.index(c) for c in cfg.planner_cameras])
         self.reset("", {})
 
     # ----------------------------------------------------------------- interface
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
         cfg = self.cfg
         self.generator = torch.Generator().manual_seed(int(task_info.get("seed", 0)))
-        self.memory = MemoryStore(1, len(cfg.cameras), cfg.sliding_window, cfg.dim)
+        self.memory = MemoryStore(1, cfg.step_tokens, cfg.sliding_window, cfg.dim)
         self.debounce = Debounce(cfg.end_window)
         self.t = 0
         self.queue: list[np.ndarray] = []
@@ -95,10 +99,10 @@ class Mem0Policy(BasePolicy):
     @torch.no_grad()
     def act(self, observation: dict[str, Any]) -> np.ndarray:
         cfg, ex = self.cfg, self.model.executor
-        images = self.images(observation)
-        tokens, z = ex.encode(images)
+        inputs = self.inputs(observation)
+        tokens, z = ex.encode(inputs)
         if self.t == 0 and self.decompose:
-            self.first = self.model.planner.embed([images[i] for i in self.planner_cams])
+            self.first = self.model.planner.embed(self.planner_inputs(inputs))
             self.subtask = self.plan(self.first)
         if self.start_subtask:
             self.memory.reset(torch.ones(1, dtype=torch.bool), tokens)
@@ -113,13 +117,21 @@ class Mem0Policy(BasePolicy):
             self.queue = list(chunk[0, :cfg.execute].double().numpy())
         action = self.queue.pop(0)
         if self.decompose and self.ended(c):
-            self.subtask_ended(images)
+            self.subtask_ended(inputs)
         self.t += 1
         return action
 
     # ------------------------------------------------------------------ helpers
-    def images(self, observation: dict[str, Any]) -> list[torch.Tensor]:
+    def inputs(self, observation: dict[str, Any]) -> list[torch.Tensor]:
+        """What the executor encodes: one image per camera, or [environment_state,
+        agent_pos] (a one-line ValueError if the observation lacks what the policy reads)."""
+        if self.cfg.reads_state:
+            return state_inputs(observation, self.state_dim)
         return image_tensors(observation, self.cfg.cameras, self.cfg.image_size)
+
+    def planner_inputs(self, inputs: list[torch.Tensor]) -> list[torch.Tensor]:
+        """The planner's share of the step's inputs: its cameras' images, or the states."""
+        return inputs if self.planner_cams is None else [inputs[i] for i in self.planner_cams]
 
     def ended(self, c: torch.Tensor) -> bool:
         if self.cfg.gt_classifier:
@@ -129,9 +141,9 @@ class Mem0Policy(BasePolicy):
         p = torch.sigmoid(self.model.executor.end_logit(c))[0].item()
         return self.debounce.update(p > self.cfg.end_threshold)
 
-    def subtask_ended(self, images: list[torch.Tensor]) -> None:
+    def subtask_ended(self, inputs: list[torch.Tensor]) -> None:
         planner = self.model.planner
-        frame = planner.embed([images[i] for i in self.planner_cams])
+        frame = planner.embed(self.planner_inputs(inputs))
         self.keys.append((self.subtask, frame[0]))
         nxt = self.plan(frame if not self.cfg.use_key else self.first)
         if nxt != self.done:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from rmbench.policies.config import PolicyConfig
+from rmbench.policies.observation import STATE, check_observation
 
 # Ablations that change what is trained (a checkpoint is trained with them) and those that
 # only change inference (any checkpoint can run them).
@@ -20,6 +21,20 @@ class Mem0Config(PolicyConfig):
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps")
 
     # --- observation
+    observation: str = "auto"
+    """What the policy reads. "pixels": the cameras below, each through its own CNN. "state":
+    observation.environment_state (normalised with the dataset's statistics) and the joint
+    state through an MLP (``state_tokens`` tokens of width ``dim``, in place of the camera
+    tokens: the anchor holds them, the sliding memory their mean, the planner its own state
+    embedding of o_0 and of the key frames); evaluation then runs the env with
+    obs_type="environment_state_agent_pos". "auto" (the default) is settled by training from
+    the dataset: "pixels" if it has camera videos, else "state"; ask for the state of a dataset
+    with videos with --set observation=state. The checkpoint stores the choice (one from
+    before this field reads as pixels)."""
+    state_tokens: int = 2
+    """With observation "state": tokens per step (the anchor's slots, as cameras are with pixels)."""
+    state_hidden: int = 256
+    """With observation "state": hidden width of the state encoder's two layers."""
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
     """Cameras the executor reads, each through its own CNN."""
     image_size: tuple[int, int] = (96, 128)
@@ -95,7 +110,10 @@ class Mem0Config(PolicyConfig):
             raise ValueError(f"unknown ablation {sorted(unknown)}; ablations: {', '.join(ABLATIONS)}")
         if self.planner_backend not in ("small", "vlm"):
             raise ValueError(f"planner_backend must be 'small' or 'vlm', got {self.planner_backend!r}")
-        if not self.cameras:
+        check_observation(self.observation)
+        if self.state_tokens < 1 or self.state_hidden < 1:
+            raise ValueError("state_tokens and state_hidden must be >= 1")
+        if not self.cameras and not self.reads_state:
             raise ValueError("Mem-0 needs at least one camera")
         if not set(self.planner_cameras) <= set(self.cameras):
             raise ValueError(f"planner cameras {self.planner_cameras} must be among {self.cameras}")
@@ -106,6 +124,16 @@ class Mem0Config(PolicyConfig):
         for name in ("sliding_window", "memory_every", "end_window", "flow_steps", "head_layers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1")
+
+    @property
+    def reads_state(self) -> bool:
+        """Reads the state observation ("auto", unsettled, reads pixels)."""
+        return self.observation == STATE
+
+    @property
+    def step_tokens(self) -> int:
+        """Tokens one step's observation becomes: one per camera, or ``state_tokens``."""
+        return self.state_tokens if self.reads_state else len(self.cameras)
 
     @property
     def use_anchor(self) -> bool:

@@ -1,7 +1,8 @@
 """Mem-0's executor: encoder -> anchor and sliding memory fusion -> c_t -> flow-matching action
 head and subtask-end classifier.
 
-    tokens_t = [CNN_cam(o_t^cam) + e_cam]            one token per camera
+    tokens_t = [CNN_cam(o_t^cam) + e_cam]            one token per camera (observation "pixels")
+             = MLP(env_state_t, state_t) + e_i        state_tokens tokens (observation "state")
     z_img    = mean(tokens_t)                        z_text = text table[s_t]
     a_t      = Fuse_A(z_img, anchor tokens)          (z_img with no_anchor / no_memory)
     s_t      = Fuse_S(z_img, last K z_img)           (z_img with no_sliding / no_memory)
@@ -18,33 +19,35 @@ from torch import nn
 from rmbench.data import layout as L
 from rmbench.policies.mem0.action_head import FlowMatchingHead
 from rmbench.policies.mem0.config import Mem0Config
+from rmbench.policies.mem0.inputs import observation_encoder, step_inputs
 from rmbench.policies.mem0.memory import MemoryFusion, MemoryStore
 from rmbench.policies.mem0.planner import Planner
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
-from rmbench.policies.nn.vision import CameraEncoders, color_jitter
 
 ACTION_DIM = 14
 
 
 class Executor(nn.Module):
-    def __init__(self, cfg: Mem0Config, texts: list[str], text_vectors: torch.Tensor | None):
+    def __init__(self, cfg: Mem0Config, texts: list[str], text_vectors: torch.Tensor | None,
+                 state_dim: int = 0):
         super().__init__()
         self.cfg = cfg
         d = cfg.dim
-        self.encoders = CameraEncoders(len(cfg.cameras), d, cfg.encoder_channels, cfg.keypoints)
-        self.camera_embed = nn.Parameter(torch.randn(len(cfg.cameras), d) * 0.02)
+        self.encoders = observation_encoder(cfg, len(cfg.cameras), state_dim)
+        self.camera_embed = nn.Parameter(torch.randn(cfg.step_tokens, d) * 0.02)
         self.text = TextTable(texts, d, text_vectors)
-        self.anchor_fusion = MemoryFusion(d, cfg.heads, len(cfg.cameras))
+        self.anchor_fusion = MemoryFusion(d, cfg.heads, cfg.step_tokens)
         self.sliding_fusion = MemoryFusion(d, cfg.heads, cfg.sliding_window)
         self.state_proj = nn.Linear(ACTION_DIM, d)
         self.head = FlowMatchingHead(d, cfg.horizon, ACTION_DIM, cfg.head_layers, cfg.heads)
         self.classifier = nn.Sequential(nn.Linear(3 * d, d), nn.GELU(), nn.Linear(d, 1))
         self.normalizer = Normalizer(ACTION_DIM)
 
-    def encode(self, images: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
-        """Per-camera uint8 (B, 3, H, W) -> tokens (B, C, d) and z_img (B, d)."""
-        tokens = self.encoders(images) + self.camera_embed
+    def encode(self, inputs: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-camera uint8 (B, 3, H, W), or [environment state (B, D), joint state (B, 14)],
+        -> tokens (B, C, d) and z_img (B, d)."""
+        tokens = self.encoders(inputs) + self.camera_embed
         return tokens, tokens.mean(1)
 
     def context(self, z: torch.Tensor, memory: MemoryStore, text: torch.Tensor) -> torch.Tensor:
@@ -67,17 +70,17 @@ class Mem0Model(nn.Module):
     """What a checkpoint holds: the executor and the planner."""
 
     def __init__(self, cfg: Mem0Config, executor_texts: list[str], planner_texts: list[str],
-                 text_vectors: dict[str, torch.Tensor] | None):
+                 text_vectors: dict[str, torch.Tensor] | None, state_dim: int = 0):
         super().__init__()
         self.cfg = cfg
         vec = text_vectors or {}
-        self.executor = Executor(cfg, executor_texts, vec.get("executor"))
+        self.executor = Executor(cfg, executor_texts, vec.get("executor"), state_dim)
         if cfg.planner_backend == "vlm":
             from rmbench.policies.mem0.planner_vlm import VLMPlanner
 
-            self.planner = VLMPlanner(cfg, planner_texts)
+            self.planner = VLMPlanner(cfg, planner_texts, state_dim=state_dim)
         else:
-            self.planner = Planner(cfg, planner_texts, vec.get("planner"))
+            self.planner = Planner(cfg, planner_texts, vec.get("planner"), state_dim)
 
 
 class Mem0Trainer(nn.Module):
@@ -89,7 +92,7 @@ class Mem0Trainer(nn.Module):
         self.model = model
         self.decompose = decompose
         cfg = model.cfg
-        self.memory = MemoryStore(batch_size, len(cfg.cameras), cfg.sliding_window, cfg.dim)
+        self.memory = MemoryStore(batch_size, cfg.step_tokens, cfg.sliding_window, cfg.dim)
         self.last_subtask = torch.full((batch_size,), -1, dtype=torch.long)
         self.generator = torch.Generator().manual_seed(seed)
         for p in model.planner.parameters():
@@ -113,10 +116,7 @@ class Mem0Trainer(nn.Module):
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
         ex, cfg = self.model.executor, self.model.cfg
-        images = [batch[L.image_key(cam)] for cam in cfg.cameras]
-        if any(cfg.jitter):
-            images = [color_jitter(img, self.generator, *cfg.jitter) for img in images]
-        tokens, z = ex.encode(images)
+        tokens, z = ex.encode(step_inputs(batch, cfg, cfg.cameras, self.generator))
         subtask = batch[L.SUBTASK_INDEX]
         reset = batch["episode_start"].bool()
         if self.decompose:

@@ -1,6 +1,8 @@
 """Mem-0's planner: which subtask comes next, from the first frame o_0, the goal, and the key
 memory (each finished subtask's text with the frame at its end). Called only when a subtask
-ends. With ``no_key`` it sees the current frame alone.
+ends. With ``no_key`` it sees the current frame alone. A frame is its embedding by the
+planner's own encoder: the planner cameras' CNNs, or with observation "state" its own state
+MLP over that step's environment and joint states.
 
 The default is small enough to train on a CPU: a transformer over
 ``[goal; o_0; (text_i + frame_i + position_i)...]`` whose goal token, read out, is scored
@@ -18,20 +20,20 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from rmbench.policies.mem0.inputs import observation_encoder
 from rmbench.policies.nn.text import TextTable
-from rmbench.policies.nn.vision import CameraEncoders
 
 DONE = "done"
 MAX_KEYS = 32  # positions beyond this share the last embedding
 
 
 class Planner(nn.Module):
-    def __init__(self, cfg, texts: list[str], text_vectors: torch.Tensor | None):
+    def __init__(self, cfg, texts: list[str], text_vectors: torch.Tensor | None,
+                 state_dim: int = 0):
         super().__init__()
         d = cfg.dim
         self.use_key = cfg.use_key
-        self.encoders = CameraEncoders(len(cfg.planner_cameras), d, cfg.encoder_channels,
-                                       cfg.keypoints)
+        self.encoders = observation_encoder(cfg, len(cfg.planner_cameras), state_dim)
         self.text = TextTable(texts, d, text_vectors)  # candidates: subtasks, then "done"
         self.goal = nn.Parameter(torch.randn(d) * 0.02)
         self.kind = nn.Parameter(torch.randn(2, d) * 0.02)  # o_0 / key entry
@@ -42,9 +44,10 @@ class Planner(nn.Module):
         self.norm = nn.LayerNorm(d)
         self.query = nn.Linear(d, d)
 
-    def embed(self, images: list[torch.Tensor]) -> torch.Tensor:
-        """Per-camera uint8 (N, 3, H, W) -> (N, d)."""
-        return self.encoders(images).mean(1)
+    def embed(self, inputs: list[torch.Tensor]) -> torch.Tensor:
+        """Per-planner-camera uint8 (N, 3, H, W), or [environment state (N, D), joint state
+        (N, 14)], -> (N, d)."""
+        return self.encoders(inputs).mean(1)
 
     def forward(self, first: torch.Tensor, keys: torch.Tensor, key_text: torch.Tensor,
                 key_valid: torch.Tensor) -> torch.Tensor:

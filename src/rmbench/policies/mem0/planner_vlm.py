@@ -2,10 +2,11 @@
 fine-tuned with LoRA (``pip install 'rmbench[vlm]'``: transformers and peft).
 
 The sequence is ``[goal] <o_0> ([subtask text] <end frame>)* <query>``: each frame becomes one
-token through the planner's CNN and a linear projector into the model's embedding space, each
-text is tokenised. The hidden state at ``<query>`` is scored against the candidate subtask texts
-and "done" by a linear head. Trained are the CNN, the projector, the head and the LoRA adapters
-of the attention projections; the language model's own weights stay frozen.
+token through the planner's CNN (its state MLP with observation "state") and a linear projector
+into the model's embedding space, each text is tokenised. The hidden state at ``<query>`` is
+scored against the candidate subtask texts and "done" by a linear head. Trained are the
+encoder, the projector, the head and the LoRA adapters of the attention projections; the
+language model's own weights stay frozen.
 
 ``vlm_model`` names a local Hugging Face causal-LM folder (``local_files_only``: nothing is
 downloaded). Empty, it builds a tiny randomly initialised Llama with a byte-level tokeniser,
@@ -17,7 +18,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from rmbench.policies.nn.vision import CameraEncoders
+from rmbench.policies.mem0.inputs import observation_encoder
 
 MAX_TEXT_TOKENS = 32
 
@@ -49,7 +50,7 @@ def _language_model(name: str):
 
 
 class VLMPlanner(nn.Module):
-    def __init__(self, cfg, texts: list[str], text_vectors=None):
+    def __init__(self, cfg, texts: list[str], text_vectors=None, state_dim: int = 0):
         super().__init__()
         from peft import LoraConfig, get_peft_model
 
@@ -60,8 +61,7 @@ class VLMPlanner(nn.Module):
         self.lm = get_peft_model(lm, LoraConfig(r=cfg.vlm_lora_rank, lora_alpha=2 * cfg.vlm_lora_rank,
                                                 target_modules=["q_proj", "v_proj"], lora_dropout=0.0))
         hidden = lm.config.hidden_size
-        self.encoders = CameraEncoders(len(cfg.planner_cameras), cfg.dim, cfg.encoder_channels,
-                                       cfg.keypoints)
+        self.encoders = observation_encoder(cfg, len(cfg.planner_cameras), state_dim)
         self.project = nn.Linear(cfg.dim, hidden)
         self.query = nn.Parameter(torch.randn(hidden) * 0.02)
         self.head = nn.Linear(hidden, len(texts))
@@ -73,8 +73,8 @@ class VLMPlanner(nn.Module):
                              persistent=False)
         self.register_buffer("text_len", torch.tensor([len(i) for i in ids]), persistent=False)
 
-    def embed(self, images: list[torch.Tensor]) -> torch.Tensor:
-        return self.encoders(images).mean(1)
+    def embed(self, inputs: list[torch.Tensor]) -> torch.Tensor:
+        return self.encoders(inputs).mean(1)
 
     def forward(self, first: torch.Tensor, keys: torch.Tensor, key_text: torch.Tensor,
                 key_valid: torch.Tensor) -> torch.Tensor:

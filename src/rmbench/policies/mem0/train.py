@@ -1,10 +1,13 @@
 """``rmbench train mem0``: the planner on (key memory -> next subtask) decisions, then the
-executor on episode-ordered batches, from one dataset of one task."""
+executor on episode-ordered batches, from one dataset of one task, on its camera frames or on
+its state observation (``Mem0Config.observation``)."""
 
 from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +25,7 @@ from rmbench.policies.mem0.planner import DONE, planner_examples, planner_loss
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import MINILM_DIM, sentence_embeddings
 from rmbench.policies.nn.vision import color_jitter
+from rmbench.policies.observation import choose
 from rmbench.tasks import get_task
 from rmbench.training.batches import batch_stream
 from rmbench.training.loop import STATE, TrainConfig, lr_at, train
@@ -37,11 +41,14 @@ def goal_text(task: str) -> str:
 
 class Mem0Frames(DemoDataset):
     """DemoDataset items plus what the executor trains on: the text of the frame's subtask
-    (the goal for M(1) tasks) and the end classifier's label."""
+    (the goal for M(1) tasks) and the end classifier's label. With observation "state" the
+    environment state instead of frames: no video is decoded."""
 
     def __init__(self, ds: Dataset, cfg: Mem0Config, decompose: bool, goal_index: int, **kw):
-        super().__init__(ds, chunk=cfg.horizon, cameras=list(cfg.cameras),
-                         image_size=cfg.image_size, stride=cfg.memory_every, **kw)
+        super().__init__(ds, chunk=cfg.horizon,
+                         cameras=[] if cfg.reads_state else list(cfg.cameras),
+                         image_size=cfg.image_size, stride=cfg.memory_every,
+                         environment_state=cfg.reads_state, **kw)
         self.decompose, self.goal_index = decompose, goal_index
         self.labels = [end_labels(ep.subtask_index, cfg.end_window) for ep in self.low_dim]
 
@@ -58,13 +65,15 @@ def build_model(cfg: Mem0Config, describe: dict[str, Any], text_vectors=None) ->
     if text_vectors is None and describe["text_encoder"] == "minilm":  # filled by the weights
         text_vectors = {k: torch.zeros(len(describe[f"{k}_texts"]), MINILM_DIM)
                         for k in ("executor", "planner")}
-    return Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], text_vectors)
+    return Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], text_vectors,
+                     state_dim=len(describe.get("state_names") or ()))
 
 
 def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg: TrainConfig,
                progress: bool = True, workers: int = 0) -> dict[str, Any]:
     ds = Dataset(dataset)
     task = get_task(ds.task)
+    cfg = replace(cfg, observation=choose(cfg.observation, ds))
     decompose = task.tmc == "M(n)"
     goal = goal_text(task.name)
     executor_texts = list(ds.subtasks) + [goal]
@@ -77,6 +86,8 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
                     "frames": ds.num_frames},
     }
+    if cfg.reads_state:
+        describe["state_names"] = ds.state_names
     if vectors is not None:
         vectors = {"executor": vectors[:len(executor_texts)],
                    "planner": vectors[len(executor_texts):]}
@@ -84,6 +95,10 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     model = build_model(cfg, describe, vectors)
     norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
     model.executor.normalizer.load_state_dict(norm.state_dict())
+    if cfg.reads_state:
+        stats = dataset_stats(ds)
+        for encoder in (model.executor.encoders, model.planner.encoders):
+            encoder.set_stats(stats, L.ENV_STATE, L.STATE)
     out = Path(out)
     planner_report = None
     if decompose and not (out / STATE).exists():
@@ -110,7 +125,7 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
     planner = model.planner
     examples = [x for e in range(ds.num_episodes)
                 for x in planner_examples(e, ds.episode(e, cameras=[]).subtask_index, done)]
-    cache = FrameCache(ds, cfg.image_size)
+    frames = planner_frames(ds, cfg)
     gen = torch.Generator().manual_seed(train_cfg.seed)
     device = torch.device("cuda" if train_cfg.device.startswith("cuda") else "cpu")
     planner.to(device)
@@ -121,7 +136,7 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
     acc_ema, loss_ema = 0.0, 0.0
     for step in range(cfg.planner_steps):
         picks = [examples[i] for i in rng.integers(len(examples), size=cfg.planner_batch)]
-        batch = planner_batch(planner, cache, cfg, picks, gen, device)
+        batch = planner_batch(planner, frames, picks, gen, device)
         for g in opt.param_groups:
             g["lr"] = lr_at(step, cfg.planner_steps, 0.1, cfg.planner_lr, cfg.planner_lr * 0.01)
         loss, acc = planner_loss(planner, batch)
@@ -138,7 +153,7 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
     with torch.no_grad():
         correct = 0
         for i in range(0, len(examples), 32):
-            b = planner_batch(planner, cache, cfg, examples[i:i + 32], None, device)
+            b = planner_batch(planner, frames, examples[i:i + 32], None, device)
             correct += int((planner(b["first"], b["keys"], b["key_text"], b["key_valid"])
                             .argmax(-1) == b["target"]).sum())
     planner.train()
@@ -146,24 +161,48 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
             "train_accuracy": round(correct / len(examples), 4), "final_loss": round(loss_ema, 5)}
 
 
-def planner_batch(planner, cache: FrameCache, cfg: Mem0Config, picks, gen, device) -> dict:
-    """Embedded frames for a list of PlannerExamples (jittered when ``gen`` is given)."""
-    cams = list(cfg.planner_cameras)
-    m = max(1, max(len(x.keys) for x in picks))
+def dataset_stats(ds: Dataset) -> dict[str, dict[str, np.ndarray]]:
+    from rmbench.data.stats import from_json
 
-    def frames(e: int, ts: list[int]) -> list[torch.Tensor]:
+    return from_json(json.loads((ds.root / L.STATS).read_text()))
+
+
+# (episode, frame indices, jitter generator or None) -> the planner's inputs at those frames
+PlannerFrames = Callable[[int, list[int], torch.Generator | None], list[torch.Tensor]]
+
+
+def planner_frames(ds: Dataset, cfg: Mem0Config) -> PlannerFrames:
+    """The planner's inputs at given frames of an episode: the planner cameras' frames (from
+    the frame cache, jittered when a generator is given), or the environment and joint states."""
+    if cfg.reads_state:
+        low_dim = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
+
+        def states(e: int, ts: list[int], gen) -> list[torch.Tensor]:
+            ep = low_dim[e]
+            return [torch.from_numpy(ep.environment_state[ts]), torch.from_numpy(ep.state[ts])]
+
+        return states
+    cache = FrameCache(ds, cfg.image_size)
+
+    def frames(e: int, ts: list[int], gen) -> list[torch.Tensor]:
         out = []
-        for cam in cams:
+        for cam in cfg.planner_cameras:
             img = torch.from_numpy(np.array(cache.frames(e, cam)[ts])).permute(0, 3, 1, 2)
             out.append(color_jitter(img, gen, *cfg.jitter) if gen is not None else img)
         return out
 
+    return frames
+
+
+def planner_batch(planner, frames: PlannerFrames, picks, gen, device) -> dict:
+    """Embedded frames for a list of PlannerExamples (jittered when ``gen`` is given)."""
+    m = max(1, max(len(x.keys) for x in picks))
     # o_0 and the key frames of each pick; with no_key the current frame alone
     times = [[0] + [f for _, f in x.keys] if planner.use_key else [x.current] for x in picks]
-    # one embedding call for the whole batch (per camera: every pick's frames in turn)
-    per_camera = zip(*(frames(x.episode, ts) for x, ts in zip(picks, times, strict=True)),
-                     strict=True)
-    embedded = planner.embed([torch.cat(imgs).to(device) for imgs in per_camera])
+    # one embedding call for the whole batch (per input: every pick's frames in turn)
+    per_input = zip(*(frames(x.episode, ts, gen) for x, ts in zip(picks, times, strict=True)),
+                    strict=True)
+    embedded = planner.embed([torch.cat(parts).to(device) for parts in per_input])
     firsts, keys, texts, valid = [], [], [], []
     for x, ts, emb in zip(picks, times, embedded.split([len(ts) for ts in times]), strict=True):
         firsts.append(emb[0])
