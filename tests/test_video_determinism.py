@@ -1,0 +1,35 @@
+"""Dataset videos are bit-exact: the encoder runs on one thread and without x264's MB-tree rate
+control, whose AVX-512 code sometimes gave another bitstream for the same frames depending on
+what the process had done before (benchmarks/encoder_determinism.py measures it)."""
+
+import re
+
+import numpy as np
+
+from rmbench.video import DATASET_CODEC, PREVIEW_CODEC, Mp4Encoder
+
+
+def x264_options(mp4: bytes) -> dict[str, str]:
+    """The settings x264 wrote into the stream (its SEI), e.g. {"mbtree": "0", ...}."""
+    text = re.search(rb"x264 - core .*? options: ([^\x00]*)", mp4).group(1).decode()
+    return dict(item.split("=", 1) for item in text.split())
+
+
+def frames(n: int = 8) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    return rng.integers(0, 256, (n, 48, 64, 3), dtype=np.uint8)
+
+
+def encode(codec, video: np.ndarray) -> bytes:
+    enc = Mp4Encoder(codec=codec)
+    for frame in video:
+        enc.add(frame)
+    return enc.finish()
+
+
+def test_videos_are_encoded_on_one_thread_without_mbtree():
+    for codec in (DATASET_CODEC, PREVIEW_CODEC):
+        opts = x264_options(encode(codec, frames()))
+        assert (opts["mbtree"], opts["threads"], opts["lookahead_threads"]) == ("0", "1", "1")
+    assert DATASET_CODEC.info()["video.mbtree"] is False
+
