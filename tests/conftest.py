@@ -1,7 +1,19 @@
+import os
+import sys
+from pathlib import Path
+
 import pytest
 
-import rmbench
-from rmbench.data import CollectConfig, collect
+# A checkout tests its own source, in this process and in every process a test starts (spawned
+# workers inherit sys.path, subprocesses PYTHONPATH). Otherwise a clone run with a shared
+# virtualenv imports the editable install's checkout, which others may be editing: then the
+# workers spawned minutes into a run import other code than this process did.
+SRC = Path(__file__).resolve().parents[1] / "src"
+sys.path.insert(0, str(SRC))
+os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(SRC), os.environ.get("PYTHONPATH")]))
+
+import rmbench  # noqa: E402
+from rmbench.data import CollectConfig, collect  # noqa: E402
 
 DATA_TASK = "observe_and_pickup"  # the shortest episodes
 

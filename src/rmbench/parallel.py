@@ -2,7 +2,9 @@
 
 Every executor hands back jobs with a blocking ``result()``. Callers submit a bounded window
 of jobs and consume results in submission order, so what they write does not depend on the
-number of workers or on the backend.
+number of workers or on the backend. Worker processes import rmbench themselves, so each job
+carries its sender's source fingerprint and a worker that imported other source refuses it
+(:mod:`rmbench.source`).
 """
 
 from __future__ import annotations
@@ -11,6 +13,8 @@ import os
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
+
+from rmbench import source
 
 BACKENDS = ("local", "ray")
 
@@ -48,6 +52,12 @@ def _share_cores(threads: int) -> None:
         os.environ.setdefault(var, str(threads))
 
 
+def _run_checked(parent_source: dict[str, str], fn, *args):
+    """A job in a worker process: ``fn(*args)``, if the worker runs its parent's source."""
+    source.check_same_source(parent_source)
+    return fn(*args)
+
+
 class Pool:
     """Local worker processes. Spawned, not forked: a fork would share MuJoCo/GL state."""
 
@@ -58,7 +68,7 @@ class Pool:
                                         initargs=(max(1, (os.cpu_count() or 1) // workers),))
 
     def submit(self, fn, *args):
-        return self.pool.submit(fn, *args)
+        return self.pool.submit(_run_checked, source.AT_IMPORT, fn, *args)
 
     def shutdown(self) -> None:
         self.pool.shutdown(wait=True, cancel_futures=True)
@@ -85,12 +95,10 @@ class Ray:
         self.window = 2 * workers
         if not ray.is_initialized():
             ray.init(ignore_reinit_error=True, log_to_driver=False)
-        self._remote: dict = {}
+        self._remote = ray.remote(num_cpus=1)(_run_checked)
 
     def submit(self, fn, *args) -> _RayJob:
-        if fn not in self._remote:
-            self._remote[fn] = self.ray.remote(num_cpus=1)(fn)
-        return _RayJob(self.ray, self._remote[fn].remote(*args))
+        return _RayJob(self.ray, self._remote.remote(source.AT_IMPORT, fn, *args))
 
     def shutdown(self) -> None:
         pass
