@@ -20,7 +20,8 @@ ROOT = "rmbench"
 # the name under rmbench (rmbench.<name>...); the rmbench package itself, the public facade,
 # is left out.
 LAYERS: list[set[str]] = [
-    {"identity", "seeds", "video", "parallel"},  # utilities that import no other rmbench module
+    # utilities that import no other rmbench module, but for parallel's check of the source
+    {"identity", "seeds", "video", "source", "parallel"},
     {"sim"},  # MuJoCo station, robot, objects, rendering backend
     {"tasks"},  # task definitions over the simulator
     {"envs", "experts"},  # the gymnasium env, and the scripted experts beside it
