@@ -107,7 +107,10 @@ def render(cells: dict, columns: list[tuple[str, float]]) -> str:
             c = cells.get((task, kind, sigma))
             if c is None or not c["failures"]:
                 continue
-            ends = "; ".join(f"{_short(r)} ({n})" for r, n in list(c["failures"].items())[:4])
+            merged: dict[str, int] = {}
+            for reason, n in c["failures"].items():
+                merged[_short(reason)] = merged.get(_short(reason), 0) + n
+            ends = "; ".join(f"{r} ({n})" for r, n in sorted(merged.items(), key=lambda x: -x[1])[:4])
             lines.append(f"- {task}, {kind} {sigma:g}: {ends}")
     commands = sorted({c["command"] for c in cells.values()})
     lines += ["", "## Commands", "",
