@@ -6,7 +6,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from rmbench.envs.noise import NoiseSpec
+from rmbench.envs.noise import NoiseSpec, perturber
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
 from rmbench.video import VideoWriter
@@ -37,8 +37,7 @@ def run_episode(env, expert, seed: int, video: str | Path | None = None,
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
     expert.reset(info["instruction"], info)
-    perturb = (noise.process(seed, 1.0 / env.unwrapped.config.control_hz).perturb
-               if noise is not None and noise.active else None)
+    perturb = perturber(noise, seed, env)
     writer = VideoWriter(video) if video else None
     ends: list[tuple[int, str]] = []
     steps, progress, reason, success = 0, 0.0, "timeout", False

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from rmbench.data.layout import Spec
-from rmbench.envs.noise import NoiseSpec
+from rmbench.envs.noise import NoiseSpec, perturber
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
 from rmbench.video import Mp4Encoder
@@ -189,8 +189,7 @@ def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = 
     sim = env.unwrapped.sim
     obs, info = env.reset(seed=seed)
     expert.reset(info["instruction"], info)
-    perturb = (noise.process(seed, 1.0 / env.unwrapped.config.control_hz).perturb
-               if noise is not None and noise.active else None)
+    perturb = perturber(noise, seed, env)
     traj = Trajectory(info["instruction"], info["hidden"])
     progress = info["progress"]
     while True:

@@ -57,6 +57,14 @@ class NoiseSpec:
         return ActionNoise(self, np.random.default_rng([_STREAM, seed]), dt)
 
 
+def perturber(noise: NoiseSpec | None, seed: int, env):
+    """``action -> action + noise`` for the episode ``seed`` of ``env``, or None without
+    noise (callers then execute the action as it is)."""
+    if noise is None or not noise.active:
+        return None
+    return noise.process(seed, 1.0 / env.unwrapped.config.control_hz).perturb
+
+
 class ActionNoise:
     """One episode's noise sequence: ``next()`` gives the (14,) offset for the next step."""
 

@@ -29,6 +29,25 @@ OBSERVATIONS = (AUTO, PIXELS, STATE)
 STATE_OBS_TYPE = "environment_state_agent_pos"
 
 
+class ReadsObservation:
+    """What a policy config derives from its ``observation``, ``state_tokens`` and ``cameras``
+    fields (Mem-0's and the baselines' configs both have them)."""
+
+    observation: str
+    state_tokens: int
+    cameras: tuple[str, ...]
+
+    @property
+    def reads_state(self) -> bool:
+        """Reads the state observation ("auto", unsettled, reads pixels)."""
+        return self.observation == STATE
+
+    @property
+    def step_tokens(self) -> int:
+        """Tokens one step's observation becomes: one per camera, or ``state_tokens``."""
+        return self.state_tokens if self.reads_state else len(self.cameras)
+
+
 def check_observation(value: str) -> None:
     if value not in OBSERVATIONS:
         raise ValueError(f"observation must be one of {', '.join(OBSERVATIONS)}, got {value!r}")

@@ -35,7 +35,7 @@ from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.state import StateEncoder
 from rmbench.policies.nn.vision import CameraEncoders, color_jitter
 from rmbench.policies.observation import (
-    STATE,
+    ReadsObservation,
     check_observation,
     choose,
     image_tensors,
@@ -50,7 +50,7 @@ ACTION_DIM = 14
 
 
 @dataclass(frozen=True)
-class VisuomotorConfig(PolicyConfig):
+class VisuomotorConfig(ReadsObservation, PolicyConfig):
     """Fields every baseline has; subclasses add theirs and may change these defaults."""
 
     observation: str = "auto"
@@ -105,16 +105,6 @@ class VisuomotorConfig(PolicyConfig):
             raise ValueError("obs_steps and horizon must be >= 1")
         if not 1 <= self.execute <= self.horizon:
             raise ValueError(f"execute ({self.execute}) must be in [1, horizon={self.horizon}]")
-
-    @property
-    def reads_state(self) -> bool:
-        """Reads the state observation ("auto", unsettled, reads pixels)."""
-        return self.observation == STATE
-
-    @property
-    def step_tokens(self) -> int:
-        """Features one step's observation becomes: one per camera, or ``state_tokens``."""
-        return self.state_tokens if self.reads_state else len(self.cameras)
 
 
 def observation_encoder(cfg: VisuomotorConfig, state_dim: int, keypoints: int,

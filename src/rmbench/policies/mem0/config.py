@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from rmbench.policies.config import PolicyConfig
-from rmbench.policies.observation import STATE, check_observation
+from rmbench.policies.observation import ReadsObservation, check_observation
 
 # Ablations that change what is trained (a checkpoint is trained with them) and those that
 # only change inference (any checkpoint can run them).
@@ -16,7 +16,7 @@ ABLATIONS = TRAINED_ABLATIONS + INFERENCE_ABLATIONS
 
 
 @dataclass(frozen=True)
-class Mem0Config(PolicyConfig):
+class Mem0Config(ReadsObservation, PolicyConfig):
     # changeable at evaluation without retraining: mem0:CKPT?execute=5&flow_steps=20
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps")
 
@@ -124,16 +124,6 @@ class Mem0Config(PolicyConfig):
         for name in ("sliding_window", "memory_every", "end_window", "flow_steps", "head_layers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1")
-
-    @property
-    def reads_state(self) -> bool:
-        """Reads the state observation ("auto", unsettled, reads pixels)."""
-        return self.observation == STATE
-
-    @property
-    def step_tokens(self) -> int:
-        """Tokens one step's observation becomes: one per camera, or ``state_tokens``."""
-        return self.state_tokens if self.reads_state else len(self.cameras)
 
     @property
     def use_anchor(self) -> bool:
