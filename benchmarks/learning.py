@@ -5,7 +5,12 @@ tabulate what each learned with which memory.
     .venv/bin/python benchmarks/learning.py --task put_back_block --obs state \\
         [--policies mem0,mem0:no_memory,mem0:no_anchor,mem0:no_sliding,dp,act] [--demos 50] \\
         [--steps 3000] [--batch 32] [--episodes 100] [--noise SIGMA --noise-kind white|smooth] \\
-        [--out runs/learning/state_put_back_block] [--workers 1] [--threads N]
+        [--set FIELD=VALUE ...] [--out runs/learning/state_put_back_block] [--workers 1] \\
+        [--threads N]
+
+``--set`` overrides a field of every trained policy's config that has it (as ``rmbench train
+--set``; a field no policy has is an error), e.g. ``--set head_layers=2 --set execute=20``;
+the overrides name the training and evaluation folders, so runs with different ones coexist.
 
 Checked end to end at toy scale (40 s on a loaded 2-core machine)::
 
@@ -68,18 +73,14 @@ def parse_policy(spec: str) -> tuple[str, tuple[str, ...]]:
     return name, ablations
 
 
-def memory_of(spec: str, tmc: str) -> str:
+def memory_of(spec: str, tmc: str, sets: list[str] = ()) -> str:
     """What carries information across steps in this policy, in words."""
     name, ablations = parse_policy(spec)
+    cfg = config_for(name, "state", list(sets), ablations)
     if name == "dp":
-        from rmbench.policies.dp.config import DPConfig
-
-        return f"observation window only ({DPConfig().obs_steps} steps)"
+        return f"observation window only ({cfg.obs_steps} steps)"
     if name == "act":
         return "observation window only (1 step; temporal ensembling averages past chunks)"
-    from rmbench.policies.mem0.config import Mem0Config
-
-    cfg = Mem0Config(ablations=ablations)
     parts = []
     if tmc == "M(n)":
         parts.append("planner phase (subtask text" + (" + key memory)" if cfg.use_key else ")"))
@@ -90,8 +91,42 @@ def memory_of(spec: str, tmc: str) -> str:
     return " + ".join(parts) or "current step only"
 
 
-def run_name(spec: str, steps: int, batch: int) -> str:
-    return f"{spec.replace(':', '-')}-s{steps}-b{batch}"
+def run_name(spec: str, steps: int, batch: int, sets: list[str] = ()) -> str:
+    tag = "".join(f"-{s.replace('=', '')}" for s in sets)
+    return f"{spec.replace(':', '-')}-s{steps}-b{batch}{tag}".replace("/", "_").replace('"', "")
+
+
+def config_for(name: str, obs: str, sets: list[str], ablations: tuple[str, ...] = ()):
+    """The policy's config with ``observation`` and the ``--set`` fields it has."""
+    from dataclasses import fields
+
+    from rmbench.cli.train import parse_overrides
+
+    if name == "mem0":
+        from rmbench.policies.mem0.config import Mem0Config as cls
+    elif name == "dp":
+        from rmbench.policies.dp.config import DPConfig as cls
+    else:
+        from rmbench.policies.act.config import ACTConfig as cls
+    names = {f.name for f in fields(cls)}
+    mine = [s for s in sets if s.partition("=")[0] in names]
+    extra = {"ablations": ablations} if ablations else {}
+    return cls(**{"observation": obs, **parse_overrides(cls, mine), **extra})
+
+
+def check_sets(sets: list[str]) -> None:
+    from dataclasses import fields
+
+    from rmbench.policies.act.config import ACTConfig
+    from rmbench.policies.dp.config import DPConfig
+    from rmbench.policies.mem0.config import Mem0Config
+
+    known = {f.name for cls in (Mem0Config, DPConfig, ACTConfig) for f in fields(cls)}
+    for s in sets:
+        key, sep, _ = s.partition("=")
+        if not sep or key not in known:
+            raise SystemExit(f"--set {s!r}: expected FIELD=VALUE with a field of a policy's "
+                             f"config; fields: {', '.join(sorted(known))}")
 
 
 def read_json(path: Path, default):
@@ -137,22 +172,15 @@ def train_stage(args, spec: str, data: Path, folder: Path) -> None:
     name, ablations = parse_policy(spec)
     train_cfg = TrainConfig(steps=args.steps, batch_size=args.batch, seed=0,
                             save_every=min(500, args.steps))
+    cfg = config_for(name, args.obs, args.set, ablations)
     t0 = time.perf_counter()
     if name == "mem0":
-        from rmbench.policies.mem0.config import Mem0Config
-        from rmbench.policies.mem0.train import train_mem0
-
-        train_mem0(data, folder, Mem0Config(observation=args.obs, ablations=ablations), train_cfg)
+        from rmbench.policies.mem0.train import train_mem0 as fit
     elif name == "dp":
-        from rmbench.policies.dp.agent import train_dp
-        from rmbench.policies.dp.config import DPConfig
-
-        train_dp(data, folder, DPConfig(observation=args.obs), train_cfg)
+        from rmbench.policies.dp.agent import train_dp as fit
     else:
-        from rmbench.policies.act.agent import train_act
-        from rmbench.policies.act.config import ACTConfig
-
-        train_act(data, folder, ACTConfig(observation=args.obs), train_cfg)
+        from rmbench.policies.act.agent import train_act as fit
+    fit(data, folder, cfg, train_cfg)
     add_time(folder, "train_wall_s", time.perf_counter() - t0)
 
 
@@ -208,6 +236,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--noise", type=float, default=0.0,
                    help="action noise executed during collection (DART), radians")
     p.add_argument("--noise-kind", choices=("white", "smooth"), default="white")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                   help="override a policy config field (VALUE as JSON), repeatable")
     p.add_argument("--out", type=Path, default=None,
                    help="data, checkpoints and evaluations (default runs/learning/<obs>_<task>)")
     p.add_argument("--results", type=Path, default=None,
@@ -220,6 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     specs = [s.strip() for s in args.policies.split(",") if s.strip()]
     for s in specs:
         parse_policy(s)
+    check_sets(args.set)
     tag = f"{args.obs}_{args.task}" + (f"_{args.noise_kind}{args.noise:g}" if args.noise else "")
     out = args.out or ROOT.parent / "runs" / "learning" / tag
     results_path = args.results or ROOT / "results" / f"learning_{tag}.json"
@@ -231,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     dataset = collect_stage(args, out)
     rows = {}
     for spec in specs:
-        run = run_name(spec, args.steps, args.batch)
+        run = run_name(spec, args.steps, args.batch, args.set)
         ckpt, evals = out / "train" / run, out / "eval" / f"{run}-e{args.episodes}"
         print(f"== {spec}: training into {ckpt}", flush=True)
         train_stage(args, spec, out / "data", ckpt)
@@ -242,14 +273,14 @@ def main(argv: list[str] | None = None) -> int:
                       "failure_reasons": failure_reasons(evals / args.task),
                       "train_wall_s": read_json(ckpt / "timing.json", {}).get("train_wall_s"),
                       "eval_wall_s": read_json(evals / "timing.json", {}).get("eval_wall_s"),
-                      "memory": memory_of(spec, tmc), "checkpoint": str(ckpt),
+                      "memory": memory_of(spec, tmc, args.set), "checkpoint": str(ckpt),
                       "evaluation": str(evals)}
     command = "python benchmarks/learning.py " + " ".join(
         shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
     import torch
 
     result = {"command": command, "task": args.task, "tmc": tmc, "obs": args.obs,
-              "demos": args.demos, "steps": args.steps, "batch": args.batch,
+              "demos": args.demos, "steps": args.steps, "batch": args.batch, "set": args.set,
               "episodes": args.episodes,
               "noise": NoiseSpec(args.noise_kind, args.noise).to_dict() if args.noise else None,
               "dataset": dataset, "policies": rows,
