@@ -111,7 +111,10 @@ def config_for(name: str, obs: str, sets: list[str], ablations: tuple[str, ...] 
     names = {f.name for f in fields(cls)}
     mine = [s for s in sets if s.partition("=")[0] in names]
     extra = {"ablations": ablations} if ablations else {}
-    return cls(**{"observation": obs, **parse_overrides(cls, mine), **extra})
+    try:
+        return cls(**{"observation": obs, **parse_overrides(cls, mine), **extra})
+    except (TypeError, ValueError) as err:
+        raise SystemExit(f"{name} with {' '.join(mine) or 'its defaults'}: {err}") from None
 
 
 def check_sets(sets: list[str]) -> None:
@@ -248,9 +251,10 @@ def main(argv: list[str] | None = None) -> int:
     args.task = get_task(args.task).name
     tmc = get_task(args.task).tmc
     specs = [s.strip() for s in args.policies.split(",") if s.strip()]
-    for s in specs:
-        parse_policy(s)
     check_sets(args.set)
+    for s in specs:  # every config is built before anything runs: a bad one stops here
+        name, ablations = parse_policy(s)
+        config_for(name, args.obs, args.set, ablations)
     tag = f"{args.obs}_{args.task}" + (f"_{args.noise_kind}{args.noise:g}" if args.noise else "")
     out = args.out or ROOT.parent / "runs" / "learning" / tag
     results_path = args.results or ROOT / "results" / f"learning_{tag}.json"
