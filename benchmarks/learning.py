@@ -6,7 +6,7 @@ tabulate what each learned with which memory.
         [--policies mem0,mem0:no_memory,mem0:no_anchor,mem0:no_sliding,dp,act] [--demos 50] \\
         [--steps 3000] [--batch 32] [--episodes 100] [--noise SIGMA --noise-kind white|smooth] \\
         [--set FIELD=VALUE ...] [--out runs/learning/state_put_back_block] [--workers 1] \\
-        [--threads N]
+        [--threads N] [--jobs N]
 
 ``--set`` overrides a field of every trained policy's config that has it (as ``rmbench train
 --set``; a field no policy has is an error), e.g. ``--set head_layers=2 --set execute=20``;
@@ -17,6 +17,9 @@ Checked end to end at toy scale (40 s on a loaded 2-core machine)::
     .venv/bin/python benchmarks/learning.py --task observe_and_pickup --obs state \\
         --policies mem0,mem0:no_memory,dp,act --demos 3 --steps 20 --episodes 2 \\
         --out /tmp/learning --results /tmp/learning/result.json
+
+With ``--jobs 2`` the same toy run trains and evaluates both policies at once, one process
+and one torch thread each (2 min 34 s beside two training runs).
 
 Every stage resumes, so a re-run after an interruption does only what is missing:
 
@@ -247,7 +250,12 @@ def main(argv: list[str] | None = None) -> int:
                    help="the JSON written (default benchmarks/results/learning_<obs>_<task>.json)")
     p.add_argument("--workers", type=int, default=1, help="processes for collection and evaluation")
     p.add_argument("--threads", type=int, default=None, help="torch threads for training")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="policies trained and evaluated at once, each in its own process with "
+                        "cores / jobs torch threads (logs in OUT/jobs)")
     args = p.parse_args(argv)
+    if args.jobs < 1:
+        raise SystemExit("--jobs must be >= 1")
     args.task = get_task(args.task).name
     tmc = get_task(args.task).tmc
     specs = [s.strip() for s in args.policies.split(",") if s.strip()]
@@ -264,38 +272,95 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
 
     dataset = collect_stage(args, out)
-    rows = {}
-    for spec in specs:
-        run = run_name(spec, args.steps, args.batch, args.set)
-        ckpt, evals = out / "train" / run, out / "eval" / f"{run}-e{args.episodes}"
-        print(f"== {spec}: training into {ckpt}", flush=True)
-        train_stage(args, spec, out / "data", ckpt)
-        print(f"== {spec}: evaluating on {args.episodes} episodes into {evals}", flush=True)
-        r = eval_stage(args, spec, ckpt, evals)
-        rows[spec] = {"success_rate": r["success_rate"], "mean_progress": r["mean_progress"],
-                      "episodes": r["episodes"], "endings": r["endings"],
-                      "failure_reasons": failure_reasons(evals / args.task),
-                      "train_wall_s": read_json(ckpt / "timing.json", {}).get("train_wall_s"),
-                      "eval_wall_s": read_json(evals / "timing.json", {}).get("eval_wall_s"),
-                      "memory": memory_of(spec, tmc, args.set), "checkpoint": str(ckpt),
-                      "evaluation": str(evals)}
+    if args.jobs > 1 and len(specs) > 1:
+        rows = run_jobs(args, specs, out)
+    else:
+        rows = {spec: run_policy(args, spec, out, tmc) for spec in specs}
     command = "python benchmarks/learning.py " + " ".join(
         shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
     import torch
 
+    threads = (max(1, (os.cpu_count() or 1) // args.jobs) if args.jobs > 1 and len(specs) > 1
+               else torch.get_num_threads())
     result = {"command": command, "task": args.task, "tmc": tmc, "obs": args.obs,
               "demos": args.demos, "steps": args.steps, "batch": args.batch, "set": args.set,
               "episodes": args.episodes,
               "noise": NoiseSpec(args.noise_kind, args.noise).to_dict() if args.noise else None,
               "dataset": dataset, "policies": rows,
               "machine": {"cpu": platform.processor() or platform.machine(),
-                          "cores": os.cpu_count(), "torch_threads": torch.get_num_threads()}}
+                          "cores": os.cpu_count(), "jobs": args.jobs, "torch_threads": threads}}
     results_path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(results_path, (json.dumps(result, indent=1) + "\n").encode())
     print(table(rows))
     print(f"wrote {results_path}")
     return 0
 
+
+def run_policy(args, spec: str, out: Path, tmc: str) -> dict:
+    """Train and evaluate one policy (each stage resumes); its row of the results."""
+    run = run_name(spec, args.steps, args.batch, args.set)
+    ckpt, evals = out / "train" / run, out / "eval" / f"{run}-e{args.episodes}"
+    print(f"== {spec}: training into {ckpt}", flush=True)
+    train_stage(args, spec, out / "data", ckpt)
+    print(f"== {spec}: evaluating on {args.episodes} episodes into {evals}", flush=True)
+    r = eval_stage(args, spec, ckpt, evals)
+    return {"success_rate": r["success_rate"], "mean_progress": r["mean_progress"],
+            "episodes": r["episodes"], "endings": r["endings"],
+            "failure_reasons": failure_reasons(evals / args.task),
+            "train_wall_s": read_json(ckpt / "timing.json", {}).get("train_wall_s"),
+            "eval_wall_s": read_json(evals / "timing.json", {}).get("eval_wall_s"),
+            "memory": memory_of(spec, tmc, args.set), "checkpoint": str(ckpt),
+            "evaluation": str(evals)}
+
+
+def job_command(args, spec: str, out: Path, results: Path, threads: int) -> list[str]:
+    """This script for one policy, with the parent's settings (the data is collected)."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--task", args.task, "--obs", args.obs,
+           "--policies", spec, "--demos", str(args.demos), "--steps", str(args.steps),
+           "--batch", str(args.batch), "--episodes", str(args.episodes),
+           "--noise", repr(args.noise), "--noise-kind", args.noise_kind, "--out", str(out),
+           "--results", str(results), "--workers", str(args.workers), "--threads", str(threads)]
+    for item in args.set:
+        cmd += ["--set", item]
+    return cmd
+
+
+def run_jobs(args, specs: list[str], out: Path) -> dict[str, dict]:
+    """Each policy in its own process, ``args.jobs`` at a time, each with cores / jobs torch
+    threads; logs and per-policy results in ``OUT/jobs``. Their rows, in ``specs`` order."""
+    import subprocess
+
+    threads = max(1, (os.cpu_count() or 1) // args.jobs)
+    folder = out / "jobs"
+    folder.mkdir(parents=True, exist_ok=True)
+    pending, running, rows = list(specs), {}, {}
+    try:
+        while pending or running:
+            while pending and len(running) < args.jobs:
+                spec = pending.pop(0)
+                name = spec.replace(":", "-")
+                log = (folder / f"{name}.log").open("a")
+                proc = subprocess.Popen(job_command(args, spec, out, folder / f"{name}.json",
+                                                    threads), stdout=log, stderr=subprocess.STDOUT)
+                running[spec] = (proc, log, name)
+                print(f"== {spec}: started (log {folder / (name + '.log')})", flush=True)
+            time.sleep(2)
+            for spec, (proc, log, name) in list(running.items()):
+                if proc.poll() is None:
+                    continue
+                log.close()
+                del running[spec]
+                if proc.returncode:
+                    raise SystemExit(f"{spec} failed (exit {proc.returncode}): see "
+                                     f"{folder / (name + '.log')}; a re-run resumes it")
+                rows[spec] = read_json(folder / f"{name}.json", {})["policies"][spec]
+                print(f"== {spec}: done", flush=True)
+    finally:
+        for proc, log, _ in running.values():  # interrupted: the jobs stop, their work resumes
+            proc.terminate()
+            proc.wait()
+            log.close()
+    return {s: rows[s] for s in specs}
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -51,3 +51,18 @@ def test_run_names_tell_overrides_apart(learning):
     assert "/" not in learning.run_name("mem0", 1, 1, ["cameras=[\"a/b\"]"])
     assert "sliding" not in learning.memory_of("mem0:no_sliding", "M(1)")
     assert "4 x 5 steps" in learning.memory_of("mem0", "M(1)", ["sliding_window=4"])
+
+
+def test_a_job_repeats_the_parent_settings_for_one_policy(learning, tmp_path):
+    import argparse
+
+    args = argparse.Namespace(task="put_back_block", obs="state", demos=50, steps=12000,
+                              batch=128, episodes=100, noise=0.02, noise_kind="white",
+                              workers=1, set=["head_layers=2", "execute=20"], jobs=2)
+    cmd = learning.job_command(args, "mem0:no_anchor", tmp_path, tmp_path / "r.json", 1)
+    assert cmd[1] == str(PATH)
+    flags = dict(zip(cmd[2::2], cmd[3::2], strict=False))
+    assert flags["--policies"] == "mem0:no_anchor" and flags["--threads"] == "1"
+    assert flags["--noise"] == "0.02" and flags["--out"] == str(tmp_path)
+    assert [cmd[i + 1] for i, a in enumerate(cmd) if a == "--set"] == args.set
+    assert "--jobs" not in cmd  # a job runs its one policy itself
