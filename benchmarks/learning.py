@@ -76,10 +76,9 @@ def parse_policy(spec: str) -> tuple[str, tuple[str, ...]]:
     return name, ablations
 
 
-def memory_of(spec: str, tmc: str, sets: list[str] = ()) -> str:
-    """What carries information across steps in this policy, in words."""
-    name, ablations = parse_policy(spec)
-    cfg = config_for(name, "state", list(sets), ablations)
+def memory_of(spec: str, tmc: str, cfg) -> str:
+    """What carries information across steps in this policy (``cfg``, its config), in words."""
+    name, _ = parse_policy(spec)
     if name == "dp":
         return f"observation window only ({cfg.obs_steps} steps)"
     if name == "act":
@@ -103,14 +102,9 @@ def config_for(name: str, obs: str, sets: list[str], ablations: tuple[str, ...] 
     """The policy's config with ``observation`` and the ``--set`` fields it has."""
     from dataclasses import fields
 
-    from rmbench.cli.train import parse_overrides
+    from rmbench.cli.train import parse_overrides, trainable
 
-    if name == "mem0":
-        from rmbench.policies.mem0.config import Mem0Config as cls
-    elif name == "dp":
-        from rmbench.policies.dp.config import DPConfig as cls
-    else:
-        from rmbench.policies.act.config import ACTConfig as cls
+    cls, _ = trainable(name)
     names = {f.name for f in fields(cls)}
     mine = [s for s in sets if s.partition("=")[0] in names]
     extra = {"ablations": ablations} if ablations else {}
@@ -123,11 +117,9 @@ def config_for(name: str, obs: str, sets: list[str], ablations: tuple[str, ...] 
 def check_sets(sets: list[str]) -> None:
     from dataclasses import fields
 
-    from rmbench.policies.act.config import ACTConfig
-    from rmbench.policies.dp.config import DPConfig
-    from rmbench.policies.mem0.config import Mem0Config
+    from rmbench.cli.train import TRAINABLE, trainable
 
-    known = {f.name for cls in (Mem0Config, DPConfig, ACTConfig) for f in fields(cls)}
+    known = {f.name for name in TRAINABLE for f in fields(trainable(name)[0])}
     for s in sets:
         key, sep, _ = s.partition("=")
         if not sep or key not in known:
@@ -169,23 +161,17 @@ def collect_stage(args, out: Path) -> dict:
             "collect_wall_s": read_json(out / "timing.json", {}).get("collect_wall_s")}
 
 
-def train_stage(args, spec: str, data: Path, folder: Path) -> None:
+def train_stage(args, spec: str, cfg, data: Path, folder: Path) -> None:
     describe = read_json(folder / "config.json", {})
     if describe.get("step") == args.steps:
         return
+    from rmbench.cli.train import trainable
     from rmbench.training.loop import TrainConfig
 
-    name, ablations = parse_policy(spec)
     train_cfg = TrainConfig(steps=args.steps, batch_size=args.batch, seed=0,
                             save_every=min(500, args.steps))
-    cfg = config_for(name, args.obs, args.set, ablations)
+    _, fit = trainable(parse_policy(spec)[0])
     t0 = time.perf_counter()
-    if name == "mem0":
-        from rmbench.policies.mem0.train import train_mem0 as fit
-    elif name == "dp":
-        from rmbench.policies.dp.agent import train_dp as fit
-    else:
-        from rmbench.policies.act.agent import train_act as fit
     fit(data, folder, cfg, train_cfg)
     add_time(folder, "train_wall_s", time.perf_counter() - t0)
 
@@ -260,9 +246,11 @@ def main(argv: list[str] | None = None) -> int:
     tmc = get_task(args.task).tmc
     specs = [s.strip() for s in args.policies.split(",") if s.strip()]
     check_sets(args.set)
-    for s in specs:  # every config is built before anything runs: a bad one stops here
+    # every config is built before anything runs: a bad one stops here
+    configs = {}
+    for s in specs:
         name, ablations = parse_policy(s)
-        config_for(name, args.obs, args.set, ablations)
+        configs[s] = config_for(name, args.obs, args.set, ablations)
     tag = f"{args.obs}_{args.task}" + (f"_{args.noise_kind}{args.noise:g}" if args.noise else "")
     out = args.out or ROOT.parent / "runs" / "learning" / tag
     results_path = args.results or ROOT / "results" / f"learning_{tag}.json"
@@ -273,15 +261,15 @@ def main(argv: list[str] | None = None) -> int:
 
     dataset = collect_stage(args, out)
     if args.jobs > 1 and len(specs) > 1:
-        rows = run_jobs(args, specs, out)
+        threads = max(1, (os.cpu_count() or 1) // args.jobs)
+        rows = run_jobs(args, specs, out, threads)
     else:
-        rows = {spec: run_policy(args, spec, out, tmc) for spec in specs}
+        import torch
+
+        threads = torch.get_num_threads()
+        rows = {spec: run_policy(args, spec, configs[spec], out, tmc) for spec in specs}
     command = "python benchmarks/learning.py " + " ".join(
         shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
-    import torch
-
-    threads = (max(1, (os.cpu_count() or 1) // args.jobs) if args.jobs > 1 and len(specs) > 1
-               else torch.get_num_threads())
     result = {"command": command, "task": args.task, "tmc": tmc, "obs": args.obs,
               "demos": args.demos, "steps": args.steps, "batch": args.batch, "set": args.set,
               "episodes": args.episodes,
@@ -296,12 +284,13 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def run_policy(args, spec: str, out: Path, tmc: str) -> dict:
-    """Train and evaluate one policy (each stage resumes); its row of the results."""
+def run_policy(args, spec: str, cfg, out: Path, tmc: str) -> dict:
+    """Train and evaluate one policy (config ``cfg``; each stage resumes); its row of the
+    results."""
     run = run_name(spec, args.steps, args.batch, args.set)
     ckpt, evals = out / "train" / run, out / "eval" / f"{run}-e{args.episodes}"
     print(f"== {spec}: training into {ckpt}", flush=True)
-    train_stage(args, spec, out / "data", ckpt)
+    train_stage(args, spec, cfg, out / "data", ckpt)
     print(f"== {spec}: evaluating on {args.episodes} episodes into {evals}", flush=True)
     r = eval_stage(args, spec, ckpt, evals)
     return {"success_rate": r["success_rate"], "mean_progress": r["mean_progress"],
@@ -309,7 +298,7 @@ def run_policy(args, spec: str, out: Path, tmc: str) -> dict:
             "failure_reasons": failure_reasons(evals / args.task),
             "train_wall_s": read_json(ckpt / "timing.json", {}).get("train_wall_s"),
             "eval_wall_s": read_json(evals / "timing.json", {}).get("eval_wall_s"),
-            "memory": memory_of(spec, tmc, args.set), "checkpoint": str(ckpt),
+            "memory": memory_of(spec, tmc, cfg), "checkpoint": str(ckpt),
             "evaluation": str(evals)}
 
 
@@ -325,12 +314,11 @@ def job_command(args, spec: str, out: Path, results: Path, threads: int) -> list
     return cmd
 
 
-def run_jobs(args, specs: list[str], out: Path) -> dict[str, dict]:
-    """Each policy in its own process, ``args.jobs`` at a time, each with cores / jobs torch
+def run_jobs(args, specs: list[str], out: Path, threads: int) -> dict[str, dict]:
+    """Each policy in its own process, ``args.jobs`` at a time, each with ``threads`` torch
     threads; logs and per-policy results in ``OUT/jobs``. Their rows, in ``specs`` order."""
     import subprocess
 
-    threads = max(1, (os.cpu_count() or 1) // args.jobs)
     folder = out / "jobs"
     folder.mkdir(parents=True, exist_ok=True)
     pending, running, rows = list(specs), {}, {}
@@ -361,6 +349,7 @@ def run_jobs(args, specs: list[str], out: Path) -> dict[str, dict]:
             proc.wait()
             log.close()
     return {s: rows[s] for s in specs}
+
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -49,8 +49,10 @@ def test_run_names_tell_overrides_apart(learning):
     tagged = learning.run_name("mem0:no_memory", 12000, 128, ["head_layers=2", 'observation="x"'])
     assert tagged.startswith(plain) and tagged != plain
     assert "/" not in learning.run_name("mem0", 1, 1, ["cameras=[\"a/b\"]"])
-    assert "sliding" not in learning.memory_of("mem0:no_sliding", "M(1)")
-    assert "4 x 5 steps" in learning.memory_of("mem0", "M(1)", ["sliding_window=4"])
+    no_sliding = learning.config_for("mem0", "state", [], ("no_sliding",))
+    assert "sliding" not in learning.memory_of("mem0:no_sliding", "M(1)", no_sliding)
+    window = learning.config_for("mem0", "state", ["sliding_window=4"])
+    assert "4 x 5 steps" in learning.memory_of("mem0", "M(1)", window)
 
 
 def test_a_job_repeats_the_parent_settings_for_one_policy(learning, tmp_path):
