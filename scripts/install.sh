@@ -64,7 +64,7 @@ if ! torch_ok; then
   torch_ok || { echo "[install] pip's index gave no CPU build of torch==$TORCH_VERSION; set" \
     "RMBENCH_TORCH_INDEX to a CPU wheel index (README.md, set-up) and re-run" >&2; exit 1; }
 fi
-echo "[install] rmbench[test,train,text,vlm]"
-"${PIP[@]}" install -q -e ".[test,train,text,vlm]"
+echo "[install] rmbench[test,train,text,vlm,vision]"
+"${PIP[@]}" install -q -e ".[test,train,text,vlm,vision]"
 .venv/bin/python -c "import rmbench, torch; assert not torch.version.cuda, 'a CUDA torch was installed'"
 echo "[install] done: .venv/bin/rmbench --help"
