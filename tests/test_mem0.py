@@ -193,6 +193,42 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(mn_dataset, tmp_path,
         train_tiny(mn_dataset, tmp_path / "b", steps=6, seed=1)
 
 
+
+def test_checkpoint_holds_the_ema_weights(dataset, tmp_path):
+    from safetensors.torch import load_file
+
+    train_tiny(dataset, tmp_path / "e", steps=3, cfg=replace(TINY, ema=True))
+    state = torch.load(tmp_path / "e" / "training" / "state.pt", weights_only=True)["model"]
+    exported = load_file(tmp_path / "e" / "model.safetensors")
+    k = "executor.head.out.weight"
+    assert torch.equal(exported[k], state[f"ema.averaged.{k}"])
+    assert not torch.equal(exported[k], state[f"model.{k}"])
+
+
+def test_action_patches_carry_consecutive_actions():
+    from rmbench.policies.mem0.action_head import FlowMatchingHead
+
+    torch.manual_seed(0)
+    # a token must be wide enough to carry its patch's noisy actions (3 x 14 here)
+    head = FlowMatchingHead(64, horizon=6, action_dim=14, layers=1, heads=2, patch=3)
+    assert head.pos.shape == (2, 64) and head.inp.in_features == 3 * 14  # 6 actions, 2 tokens
+    # the chunk comes back in order: a patched head fits one chunk with a ramp along time
+    cond = torch.randn(1, 2, 64)
+    target = torch.linspace(-1, 1, 6)[None, :, None].expand(1, 6, 14)
+    opt = torch.optim.Adam(head.parameters(), lr=3e-3)
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(300):
+        loss = head.loss(cond.expand(64, -1, -1), target.expand(64, -1, -1),
+                         torch.zeros(64, 6, dtype=torch.bool), gen)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    chunk = head.sample(cond, steps=10, generator=gen)
+    assert chunk.shape == (1, 6, 14)
+    assert (chunk - target).abs().max() < 0.2, chunk[0, :, 0]
+    with pytest.raises(ValueError, match="action_patch"):
+        Mem0Config(horizon=30, action_patch=4)
+
 # ------------------------------------------------------------------ checkpoints and the loop
 def test_checkpoint_round_trip_gives_identical_actions(mn_ckpt):
     env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)

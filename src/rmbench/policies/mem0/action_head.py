@@ -4,6 +4,10 @@
 Training draws t ~ U(0, 1) and noise e, forms x_t = t a + (1 - t) e and regresses the velocity
 a - e. Sampling integrates dx/dt from noise at t = 0 to t = 1 in ``steps`` Euler steps; the
 noise comes from the caller's generator, so a seeded episode samples the same chunks.
+
+With ``patch`` p > 1 each token carries p consecutive actions (H / p action tokens): the
+transformer's cost falls with its token count, so on a CPU p buys training samples; p = 1 is
+one token per action.
 """
 
 from __future__ import annotations
@@ -16,24 +20,29 @@ from rmbench.policies.nn.embeddings import time_embedding
 
 
 class FlowMatchingHead(nn.Module):
-    def __init__(self, dim: int, horizon: int, action_dim: int, layers: int, heads: int):
+    def __init__(self, dim: int, horizon: int, action_dim: int, layers: int, heads: int,
+                 patch: int = 1):
         super().__init__()
-        self.dim, self.horizon, self.action_dim = dim, horizon, action_dim
-        self.inp = nn.Linear(action_dim, dim)
-        self.pos = nn.Parameter(torch.randn(horizon, dim) * 0.02)
+        self.dim, self.horizon, self.action_dim, self.patch = dim, horizon, action_dim, patch
+        self.tokens = horizon // patch
+        self.inp = nn.Linear(patch * action_dim, dim)
+        self.pos = nn.Parameter(torch.randn(self.tokens, dim) * 0.02)
         self.time = nn.Sequential(nn.Linear(dim, dim), nn.SiLU(), nn.Linear(dim, dim))
         layer = nn.TransformerEncoderLayer(dim, heads, 4 * dim, dropout=0.0, activation="gelu",
                                            batch_first=True, norm_first=True)
         self.blocks = nn.TransformerEncoder(layer, layers, enable_nested_tensor=False)
         self.norm = nn.LayerNorm(dim)
-        self.out = nn.Linear(dim, action_dim)
+        self.out = nn.Linear(dim, patch * action_dim)
 
     def velocity(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """x (B, H, A) at times t (B,), context tokens cond (B, N, d) -> (B, H, A)."""
         # the noise level goes into every action token: each needs it to scale its velocity
+        b = x.shape[0]
         time = self.time(time_embedding(t, self.dim))[:, None]
-        tokens = torch.cat([cond, self.inp(x) + self.pos + time], 1)
-        return self.out(self.norm(self.blocks(tokens)[:, -self.horizon:]))
+        patches = x.reshape(b, self.tokens, self.patch * self.action_dim)
+        tokens = torch.cat([cond, self.inp(patches) + self.pos + time], 1)
+        out = self.out(self.norm(self.blocks(tokens)[:, -self.tokens:]))
+        return out.reshape(b, self.horizon, self.action_dim)
 
     def loss(self, cond: torch.Tensor, actions: torch.Tensor, is_pad: torch.Tensor,
              generator: torch.Generator | None = None) -> torch.Tensor:

@@ -61,6 +61,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     """D: actions executed from each chunk before predicting again (1 <= D <= H)."""
     head_layers: int = 4
     """Transformer layers of the flow-matching action head."""
+    action_patch: int = 1
+    """Consecutive actions per action-head token (H / action_patch tokens): the head's cost
+    falls with its token count."""
     relative_actions: bool = True
     """Joint targets as offsets from the current joint positions, grippers absolute (as openpi
     does for ALOHA): holding still is the zero prediction. False: absolute targets."""
@@ -97,6 +100,11 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     lr_backbone: float = 1e-3
     """CNN encoders, trained from scratch (published 1e-5 is for a pretrained backbone)."""
     min_lr_backbone: float = 1e-5
+    ema: bool = False
+    """Export the exponential moving average of the executor's weights (Diffusion Policy's
+    warm-up, nn/ema.py) instead of the last step's."""
+    ema_power: float = 0.75
+    ema_max_decay: float = 0.9999
     jitter: tuple[float, float, float] = (0.1, 0.1, 0.1)
     """Colour jitter (brightness, contrast, saturation) in training; hue is not jittered."""
     # --- ablations
@@ -121,6 +129,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
             raise ValueError(f"execute (D={self.execute}) must be in [1, horizon={self.horizon}]")
         if self.dim % self.heads:
             raise ValueError(f"dim {self.dim} must be divisible by heads {self.heads}")
+        if self.action_patch < 1 or self.horizon % self.action_patch:
+            raise ValueError(f"action_patch ({self.action_patch}) must be >= 1 and divide the "
+                             f"horizon ({self.horizon})")
         for name in ("sliding_window", "memory_every", "end_window", "flow_steps", "head_layers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1")

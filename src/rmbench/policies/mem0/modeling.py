@@ -22,6 +22,7 @@ from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.inputs import observation_encoder, step_inputs
 from rmbench.policies.mem0.memory import MemoryFusion, MemoryStore
 from rmbench.policies.mem0.planner import Planner
+from rmbench.policies.nn.ema import EMA
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
 
@@ -40,7 +41,8 @@ class Executor(nn.Module):
         self.anchor_fusion = MemoryFusion(d, cfg.heads, cfg.step_tokens)
         self.sliding_fusion = MemoryFusion(d, cfg.heads, cfg.sliding_window)
         self.state_proj = nn.Linear(ACTION_DIM, d)
-        self.head = FlowMatchingHead(d, cfg.horizon, ACTION_DIM, cfg.head_layers, cfg.heads)
+        self.head = FlowMatchingHead(d, cfg.horizon, ACTION_DIM, cfg.head_layers, cfg.heads,
+                                     cfg.action_patch)
         self.classifier = nn.Sequential(nn.Linear(3 * d, d), nn.GELU(), nn.Linear(d, 1))
         self.normalizer = Normalizer(ACTION_DIM)
 
@@ -97,6 +99,8 @@ class Mem0Trainer(nn.Module):
         self.generator = torch.Generator().manual_seed(seed)
         for p in model.planner.parameters():
             p.requires_grad_(False)
+        # built after the planner is fitted: its weights are copied as they are and stay
+        self.ema = EMA(model, cfg.ema_power, cfg.ema_max_decay) if cfg.ema else None
 
     def to(self, *args, **kwargs):  # the memory store follows the model's device
         super().to(*args, **kwargs)
@@ -148,5 +152,9 @@ class Mem0Trainer(nn.Module):
         self.last_subtask.copy_(state["last_subtask"])
         self.generator.set_state(state["generator"].cpu())
 
+    def after_step(self) -> None:
+        if self.ema is not None:
+            self.ema.update(self.model)
+
     def export_module(self) -> Mem0Model:
-        return self.model
+        return self.model if self.ema is None else self.ema.averaged
