@@ -110,12 +110,17 @@ class DemoDataset(torch.utils.data.Dataset):
         k = int(np.searchsorted(self.starts, i, side="right") - 1)
         return k, int(i - self.starts[k])
 
+    def observed(self, t: int) -> int | np.ndarray:
+        """The frames an item at frame ``t`` observes: ``t``, or with a history the last n,
+        oldest first, the episode's first repeated before its start."""
+        return np.maximum(np.arange(t - self.history + 1, t + 1), 0) if self.history > 1 else t
+
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
         k, t = self.locate(int(i))
         ep = self.low_dim[k]
         n = len(ep)
         idx = np.minimum(np.arange(t, t + self.chunk), n - 1)
-        seen = np.maximum(np.arange(t - self.history + 1, t + 1), 0) if self.history > 1 else t
+        seen = self.observed(t)
         item = {
             L.STATE: torch.from_numpy(ep.state[seen].copy()),
             L.ACTION: torch.from_numpy(ep.action[idx].copy()),

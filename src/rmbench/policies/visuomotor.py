@@ -4,12 +4,14 @@ observation window.
 
 A model here implements
     ``observe(inputs, state) -> features``   one control step's observation, encoded once:
-                                             ``inputs`` the per-camera images, or with
+                                             ``inputs`` the per-camera images (with a
+                                             frozen backbone their feature maps), or with
                                              observation "state" [environment_state, state]
     ``predict(window, state, generator) -> (B, H, A)``   normalised action chunk from the last
                                                          ``obs_steps`` features, oldest first
-and holds ``encoders`` (its CNNs, or the state MLP) and ``normalizer``; it is built as
-``model_cls(cfg, state_dim)`` (``state_dim`` the environment state's length, 0 for pixels).
+and holds ``encoders`` (its CNNs or backbone heads, or the state MLP) and ``normalizer``; it
+is built as ``model_cls(cfg, state_dim)`` (``state_dim`` the environment state's length, 0 for
+pixels).
 Nothing carries over beyond the window: that is the point of these baselines on a memory
 benchmark.
 """
@@ -31,14 +33,16 @@ from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config, save_checkpoint
 from rmbench.policies.config import PolicyConfig, parse_argument
+from rmbench.policies.feature_cache import features_key, with_features
+from rmbench.policies.nn.backbone import camera_encoders
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.state import StateEncoder
-from rmbench.policies.nn.vision import CameraEncoders, color_jitter
+from rmbench.policies.nn.vision import color_jitter
 from rmbench.policies.observation import (
     ReadsObservation,
+    camera_inputs,
     check_observation,
     choose,
-    image_tensors,
     state_inputs,
     state_tensor,
 )
@@ -71,7 +75,8 @@ class VisuomotorConfig(ReadsObservation, PolicyConfig):
     image_size: tuple[int, int] = (96, 128)
     """(height, width) the frames are resized to."""
     encoder_channels: tuple[int, ...] = (32, 64, 128, 128)
-    """CNN stage widths; each stage halves the resolution."""
+    """CNN stage widths; each stage halves the resolution. With a frozen ``backbone`` the last
+    is the width of the heads over its features."""
     obs_steps: int = 1
     """Observation window: the model sees this many most recent control steps."""
     horizon: int = 16
@@ -87,10 +92,11 @@ class VisuomotorConfig(ReadsObservation, PolicyConfig):
     long GPU runs; at CPU scale (batch 32, a few thousand steps) Mem-0's measured 1e-3 is used."""
     min_lr: float = 1e-5
     lr_backbone: float = 1e-3
-    """The CNNs, trained from scratch."""
+    """The CNNs, trained from scratch (with a frozen ``backbone``: the heads over its features)."""
     min_lr_backbone: float = 1e-5
     jitter: tuple[float, float, float] = (0.1, 0.1, 0.1)
-    """Colour jitter (brightness, contrast, saturation) in training."""
+    """Colour jitter (brightness, contrast, saturation) in training; none with a frozen
+    ``backbone`` (its features are cached once per frame)."""
 
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute",)
 
@@ -109,17 +115,18 @@ class VisuomotorConfig(ReadsObservation, PolicyConfig):
 
 def observation_encoder(cfg: VisuomotorConfig, state_dim: int, keypoints: int,
                         pooled: bool = True) -> nn.Module:
-    """The CNNs (one per camera; ``pooled=False``: feature maps) or, with observation "state",
-    the state MLP (``cfg.state_tokens`` tokens (B, n, cfg.dim))."""
+    """The CNNs or backbone heads (one per camera; ``pooled=False``: feature maps) or, with
+    observation "state", the state MLP (``cfg.state_tokens`` tokens (B, n, cfg.dim))."""
     if cfg.reads_state:
         return StateEncoder(state_dim, cfg.dim, cfg.state_tokens, cfg.state_hidden)
-    return CameraEncoders(len(cfg.cameras), cfg.dim, cfg.encoder_channels, keypoints, pooled)
+    return camera_encoders(cfg.backbone, cfg.backbone_stride, len(cfg.cameras), cfg.dim,
+                           cfg.encoder_channels, keypoints, pooled)
 
 
 class VisuomotorTrainer(nn.Module):
-    """The training step's shared parts: jittered images per camera (flattened over the
-    observation window), the two learning-rate groups, and the noise generator carried across
-    a resume. Subclasses implement ``forward(batch) -> (loss, logs)``."""
+    """The training step's shared parts: jittered images (or cached backbone features) per
+    camera, flattened over the observation window, the two learning-rate groups, and the noise
+    generator carried across a resume. Subclasses implement ``forward(batch) -> (loss, logs)``."""
 
     def __init__(self, model: nn.Module, seed: int):
         super().__init__()
@@ -135,6 +142,8 @@ class VisuomotorTrainer(nn.Module):
         b, n = state.shape[:2]
         if cfg.reads_state:
             inputs = [batch[L.ENV_STATE].reshape(b * n, -1), state.reshape(b * n, -1)]
+        elif cfg.reads_features:  # no jitter on cached features (feature_cache.py)
+            inputs = [batch[features_key(cam)].flatten(0, -4) for cam in cfg.cameras]
         else:
             inputs = []
             for cam in cfg.cameras:
@@ -199,9 +208,10 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
         model.encoders.set_stats(stats, L.ENV_STATE, L.STATE)
     trainer = trainer_cls(model, train_cfg.seed)
     frames = DemoDataset(ds, chunk=cfg.horizon,
-                         cameras=[] if cfg.reads_state else list(cfg.cameras),
+                         cameras=[] if cfg.reads_state or cfg.reads_features else list(cfg.cameras),
                          image_size=cfg.image_size, history=cfg.obs_steps,
                          environment_state=cfg.reads_state)
+    frames = with_features(frames, ds, cfg)
 
     def batches(start: int, rank: int, world: int):
         sampler = RandomFrameSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
@@ -264,11 +274,12 @@ class VisuomotorPolicy(BasePolicy):
         return action
 
     def inputs(self, observation: dict[str, Any]) -> list[torch.Tensor]:
-        """What ``model.observe`` encodes: one image per camera, or [environment_state,
-        agent_pos] (a one-line ValueError if the observation lacks what the policy reads)."""
+        """What ``model.observe`` encodes: one image (or its frozen backbone's feature map)
+        per camera, or [environment_state, agent_pos] (a one-line ValueError if the
+        observation lacks what the policy reads)."""
         if self.cfg.reads_state:
             return state_inputs(observation, self.model.encoders.state_dim)
-        return image_tensors(observation, self.cfg.cameras, self.cfg.image_size)
+        return camera_inputs(observation, self.cfg)
 
     def chunk(self, state: torch.Tensor) -> np.ndarray:
         """A new chunk (H, 14) of absolute joint targets from the current window."""

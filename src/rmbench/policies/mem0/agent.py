@@ -1,9 +1,10 @@
 """``--policy mem0:CKPT[?ablation=A,B]``: Mem-0's closed loop.
 
-Every step: encode the frame (or, for a checkpoint trained on the state, the observation's
-``environment_state`` and ``agent_pos``); at a subtask's first step the anchor is set and the sliding
-window emptied; c_t from the memories; a new chunk of H actions when the last D are used; the
-end classifier's debounced verdict (or, with gt_classifier, the simulator's subtask boundary).
+Every step: encode the frames (through the frozen backbone first, for a checkpoint trained
+with one), or for a checkpoint trained on the state the observation's ``environment_state``
+and ``agent_pos``; at a subtask's first step the anchor is set and the sliding window emptied;
+c_t from the memories; a new chunk of H actions when the last D are used; the end classifier's
+debounced verdict (or, with gt_classifier, the simulator's subtask boundary).
 When a subtask ends its text and end frame go to key memory and the planner names the next
 one. M(1) tasks run as one subtask, the goal: no planner, no classifier.
 """
@@ -25,7 +26,7 @@ from rmbench.policies.mem0.config import TRAINED_ABLATIONS, Mem0Config
 from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import DONE
 from rmbench.policies.mem0.train import build_model, goal_text
-from rmbench.policies.observation import image_tensors, state_inputs, state_tensor
+from rmbench.policies.observation import camera_inputs, state_inputs, state_tensor
 
 
 def load_mem0(path: str | Path, ablations: tuple[str, ...] = (),
@@ -123,11 +124,12 @@ class Mem0Policy(BasePolicy):
 
     # ------------------------------------------------------------------ helpers
     def inputs(self, observation: dict[str, Any]) -> list[torch.Tensor]:
-        """What the executor encodes: one image per camera, or [environment_state,
-        agent_pos] (a one-line ValueError if the observation lacks what the policy reads)."""
+        """What the executor encodes: one image (or its frozen backbone's feature map) per
+        camera, or [environment_state, agent_pos] (a one-line ValueError if the observation
+        lacks what the policy reads)."""
         if self.cfg.reads_state:
             return state_inputs(observation, self.state_dim)
-        return image_tensors(observation, self.cfg.cameras, self.cfg.image_size)
+        return camera_inputs(observation, self.cfg)
 
     def planner_inputs(self, inputs: list[torch.Tensor]) -> list[torch.Tensor]:
         """The planner's share of the step's inputs: its cameras' images, or the states."""

@@ -43,7 +43,8 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     dim: int = 128
     """Width of every token: z_img, z_text, memory entries, the action head."""
     encoder_channels: tuple[int, ...] = (32, 64, 128, 128)
-    """CNN stage widths; each stage halves the resolution."""
+    """CNN stage widths; each stage halves the resolution. With a frozen ``backbone`` the last
+    is the width of the heads over its features."""
     keypoints: int = 32
     """Spatial-softmax keypoints per camera, pooled beside the channel mean."""
     # --- memory
@@ -98,7 +99,8 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     below holding still (0.047 vs 0.052 rad), where 1e-4 reached 0.20 and 0.114."""
     min_lr_head: float = 1e-5
     lr_backbone: float = 1e-3
-    """CNN encoders, trained from scratch (published 1e-5 is for a pretrained backbone)."""
+    """CNN encoders, trained from scratch (published 1e-5 is for a pretrained backbone); with
+    a frozen ``backbone``, the heads over its features."""
     min_lr_backbone: float = 1e-5
     ema: bool = False
     """Export the exponential moving average of the executor's weights (Diffusion Policy's
@@ -106,7 +108,8 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     ema_power: float = 0.75
     ema_max_decay: float = 0.9999
     jitter: tuple[float, float, float] = (0.1, 0.1, 0.1)
-    """Colour jitter (brightness, contrast, saturation) in training; hue is not jittered."""
+    """Colour jitter (brightness, contrast, saturation) in training; hue is not jittered.
+    None with a frozen ``backbone`` (its features are cached once per frame)."""
     # --- ablations
     ablations: tuple[str, ...] = ()
     """Any of no_anchor, no_sliding, no_memory, no_key (trained) and gt_classifier (inference)."""

@@ -1,6 +1,7 @@
 """What Mem-0's executor and planner read at one step, by the config's ``observation``: the
-cameras' frames through one CNN each, or the environment and joint states through the state
-MLP. Either encoder maps a step's inputs to tokens (B, n, dim)."""
+cameras' frames through one CNN each (or, with a frozen ``backbone``, their feature maps
+through one head each), or the environment and joint states through the state MLP. Either
+encoder maps a step's inputs to tokens (B, n, dim)."""
 
 from __future__ import annotations
 
@@ -8,25 +9,31 @@ import torch
 from torch import nn
 
 from rmbench.data import layout as L
+from rmbench.policies.feature_cache import features_key
 from rmbench.policies.mem0.config import Mem0Config
+from rmbench.policies.nn.backbone import camera_encoders
 from rmbench.policies.nn.state import StateEncoder
-from rmbench.policies.nn.vision import CameraEncoders, color_jitter
+from rmbench.policies.nn.vision import color_jitter
 
 
 def observation_encoder(cfg: Mem0Config, cameras: int, state_dim: int) -> nn.Module:
-    """The CNNs (one per camera) or, with observation "state", the state MLP; either maps the
-    step's inputs (``Mem0Policy.inputs``) to tokens (B, n, dim)."""
+    """The CNNs or backbone heads (one per camera) or, with observation "state", the state
+    MLP; either maps the step's inputs (``Mem0Policy.inputs``) to tokens (B, n, dim)."""
     if cfg.reads_state:
         return StateEncoder(state_dim, cfg.dim, cfg.state_tokens, cfg.state_hidden)
-    return CameraEncoders(cameras, cfg.dim, cfg.encoder_channels, cfg.keypoints)
+    return camera_encoders(cfg.backbone, cfg.backbone_stride, cameras, cfg.dim,
+                           cfg.encoder_channels, cfg.keypoints)
 
 
 def step_inputs(batch: dict[str, torch.Tensor], cfg: Mem0Config, cameras: tuple[str, ...],
                 generator: torch.Generator | None) -> list[torch.Tensor]:
     """A training batch's inputs to ``observation_encoder``: the frames of ``cameras``
-    (jittered when ``generator`` is given) or the environment and joint states."""
+    (jittered when ``generator`` is given), their cached backbone features, or the
+    environment and joint states."""
     if cfg.reads_state:
         return [batch[L.ENV_STATE], batch[L.STATE]]
+    if cfg.reads_features:
+        return [batch[features_key(cam)] for cam in cameras]
     images = [batch[L.image_key(cam)] for cam in cameras]
     if generator is not None and any(cfg.jitter):
         images = [color_jitter(img, generator, *cfg.jitter) for img in images]

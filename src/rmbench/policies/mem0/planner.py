@@ -45,8 +45,8 @@ class Planner(nn.Module):
         self.query = nn.Linear(d, d)
 
     def embed(self, inputs: list[torch.Tensor]) -> torch.Tensor:
-        """Per-planner-camera uint8 (N, 3, H, W), or [environment state (N, D), joint state
-        (N, 14)], -> (N, d)."""
+        """Per-planner-camera uint8 (N, 3, H, W) (with a frozen backbone, their feature maps),
+        or [environment state (N, D), joint state (N, 14)], -> (N, d)."""
         return self.encoders(inputs).mean(1)
 
     def forward(self, first: torch.Tensor, keys: torch.Tensor, key_text: torch.Tensor,

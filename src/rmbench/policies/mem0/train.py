@@ -1,6 +1,7 @@
 """``rmbench train mem0``: the planner on (key memory -> next subtask) decisions, then the
-executor on episode-ordered batches, from one dataset of one task, on its camera frames or on
-its state observation (``Mem0Config.observation``)."""
+executor on episode-ordered batches, from one dataset of one task, on its camera frames (or
+their cached features by a frozen ``backbone``) or on its state observation
+(``Mem0Config.observation``)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from rmbench.data import layout as L
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
 from rmbench.policies.checkpoint import save_checkpoint
+from rmbench.policies.feature_cache import FeatureCache, with_features
 from rmbench.policies.mem0.classifier import end_labels
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
@@ -42,11 +44,12 @@ def goal_text(task: str) -> str:
 class Mem0Frames(DemoDataset):
     """DemoDataset items plus what the executor trains on: the text of the frame's subtask
     (the goal for M(1) tasks) and the end classifier's label. With observation "state" the
-    environment state instead of frames: no video is decoded."""
+    environment state instead of frames: no video is decoded; with a frozen backbone no frames
+    either (``with_features`` adds their cached features)."""
 
     def __init__(self, ds: Dataset, cfg: Mem0Config, decompose: bool, goal_index: int, **kw):
         super().__init__(ds, chunk=cfg.horizon,
-                         cameras=[] if cfg.reads_state else list(cfg.cameras),
+                         cameras=[] if cfg.reads_state or cfg.reads_features else list(cfg.cameras),
                          image_size=cfg.image_size, stride=cfg.memory_every,
                          environment_state=cfg.reads_state, **kw)
         self.decompose, self.goal_index = decompose, goal_index
@@ -104,7 +107,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     if decompose and not (out / STATE).exists():
         planner_report = fit_planner(model, ds, cfg, train_cfg, planner_texts.index(DONE), progress)
     trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed)
-    frames = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
+    frames = with_features(Mem0Frames(ds, cfg, decompose, executor_texts.index(goal)), ds, cfg)
 
     def batches(start: int, rank: int, world: int):
         sampler = EpisodeOrderSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
@@ -173,7 +176,8 @@ PlannerFrames = Callable[[int, list[int], torch.Generator | None], list[torch.Te
 
 def planner_frames(ds: Dataset, cfg: Mem0Config) -> PlannerFrames:
     """The planner's inputs at given frames of an episode: the planner cameras' frames (from
-    the frame cache, jittered when a generator is given), or the environment and joint states."""
+    the frame cache, jittered when a generator is given) or their cached backbone features,
+    or the environment and joint states."""
     if cfg.reads_state:
         low_dim = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
 
@@ -182,6 +186,14 @@ def planner_frames(ds: Dataset, cfg: Mem0Config) -> PlannerFrames:
             return [torch.from_numpy(ep.environment_state[ts]), torch.from_numpy(ep.state[ts])]
 
         return states
+    if cfg.reads_features:
+        features = FeatureCache(ds, cfg.backbone, cfg.backbone_stride, cfg.image_size)
+
+        def cached(e: int, ts: list[int], gen) -> list[torch.Tensor]:
+            return [torch.from_numpy(np.array(features.features(e, cam)[ts]))
+                    for cam in cfg.planner_cameras]
+
+        return cached
     cache = FrameCache(ds, cfg.image_size)
 
     def frames(e: int, ts: list[int], gen) -> list[torch.Tensor]:

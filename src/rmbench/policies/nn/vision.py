@@ -1,9 +1,11 @@
-"""A small ResNet-style image encoder written here (no torchvision), and colour jitter.
+"""A small ResNet-style image encoder written here (no torchvision), the readout that turns a
+feature map into a token, and colour jitter.
 
 GroupNorm instead of BatchNorm, as in Diffusion Policy: batch statistics would differ between
 the episode-ordered training batches and single-frame inference. Each camera's feature map is
 pooled two ways: the channel mean (what is there) and spatial-softmax keypoints (where it is);
-a small CNN's mean alone keeps too little position for manipulation.
+a small CNN's mean alone keeps too little position for manipulation. The same readout serves
+the heads over a frozen backbone's feature maps (``backbone.py``).
 """
 
 from __future__ import annotations
@@ -49,7 +51,28 @@ class SpatialSoftmax(nn.Module):
         return (attn @ grid).reshape(b, -1)
 
 
-class ImageEncoder(nn.Module):
+class Readout(nn.Module):
+    """The end of an encoder: a (B, C, h, w) feature map -> a d-dim token, [channel mean;
+    spatial-softmax keypoints] through a linear layer and LayerNorm; or with ``pooled=False`` a
+    1x1 convolution to a d-dim map (B, d, h, w). A subclass builds its trunk, then calls
+    ``build_readout`` (its modules, ``keypoints`` and ``out``, are named and created after the
+    trunk's, so the weights' names and initial values do not depend on this base)."""
+
+    def build_readout(self, channels: int, dim: int, keypoints: int, pooled: bool) -> None:
+        self.pooled = pooled
+        if pooled:
+            self.keypoints = SpatialSoftmax(channels, keypoints)
+            self.out = nn.Sequential(nn.Linear(channels + 2 * keypoints, dim), nn.LayerNorm(dim))
+        else:
+            self.out = nn.Conv2d(channels, dim, 1)
+
+    def readout(self, x: torch.Tensor) -> torch.Tensor:
+        if not self.pooled:
+            return self.out(x)
+        return self.out(torch.cat([x.mean((2, 3)), self.keypoints(x)], -1))
+
+
+class ImageEncoder(Readout):
     """uint8 images (B, 3, H, W) -> one d-dim token per image, or with ``pooled=False`` a d-dim
     feature map (B, d, H / 2^n, W / 2^n) for models that attend over image patches (ACT).
 
@@ -58,7 +81,6 @@ class ImageEncoder(nn.Module):
     def __init__(self, dim: int, channels: tuple[int, ...] = (32, 64, 128, 128), keypoints: int = 32,
                  pooled: bool = True):
         super().__init__()
-        self.pooled = pooled
         self.stem = nn.Sequential(nn.Conv2d(3, channels[0], 5, 2, 2, bias=False),
                                   nn.GroupNorm(_groups(channels[0]), channels[0]), nn.ReLU())
         stages, c = [], channels[0]
@@ -66,11 +88,7 @@ class ImageEncoder(nn.Module):
             stages.append(ResBlock(c, c_out, stride=2))
             c = c_out
         self.stages = nn.Sequential(*stages)
-        if pooled:
-            self.keypoints = SpatialSoftmax(c, keypoints)
-            self.out = nn.Sequential(nn.Linear(c + 2 * keypoints, dim), nn.LayerNorm(dim))
-        else:
-            self.out = nn.Conv2d(c, dim, 1)
+        self.build_readout(c, dim, keypoints, pooled)
         self.register_buffer("mean", torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1))
         self.register_buffer("std", torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1))
 
@@ -80,24 +98,25 @@ class ImageEncoder(nn.Module):
         # (torch 2.13, seen as a double free in mkldnn_convolution_backward_weights)
         x = images.contiguous()
         x = x.float() / 255.0 if x.dtype == torch.uint8 else x
-        x = self.stages(self.stem((x - self.mean) / self.std))
-        if not self.pooled:
-            return self.out(x)
-        return self.out(torch.cat([x.mean((2, 3)), self.keypoints(x)], -1))
+        return self.readout(self.stages(self.stem((x - self.mean) / self.std)))
 
 
-class CameraEncoders(nn.ModuleList):
-    """One ImageEncoder per camera (the cameras see different things): a list of uint8
-    (B, 3, H, W) images, in camera order, -> tokens (B, cameras, dim), or feature maps
-    (B, cameras, dim, h, w) when not ``pooled``. A ModuleList, so its weights are named
-    ``<name>.<camera index>.*``."""
+class PerCamera(nn.ModuleList):
+    """One module per camera (the cameras see different things): a list of per-camera inputs,
+    in camera order, -> their outputs stacked (B, cameras, ...). A ModuleList, so its weights
+    are named ``<name>.<camera index>.*``."""
+
+    def forward(self, inputs: list[torch.Tensor]) -> torch.Tensor:
+        return torch.stack([m(x) for m, x in zip(self, inputs, strict=True)], 1)
+
+
+class CameraEncoders(PerCamera):
+    """One ImageEncoder per camera: a list of uint8 (B, 3, H, W) images -> tokens
+    (B, cameras, dim), or feature maps (B, cameras, dim, h, w) when not ``pooled``."""
 
     def __init__(self, cameras: int, dim: int, channels: tuple[int, ...], keypoints: int,
                  pooled: bool = True):
         super().__init__(ImageEncoder(dim, channels, keypoints, pooled) for _ in range(cameras))
-
-    def forward(self, images: list[torch.Tensor]) -> torch.Tensor:
-        return torch.stack([enc(img) for enc, img in zip(self, images, strict=True)], 1)
 
 
 def color_jitter(images: torch.Tensor, generator: torch.Generator | None, brightness: float = 0.1,

@@ -1,0 +1,150 @@
+"""A frozen backbone's features of a dataset's frames, encoded once and memory-mapped, so that a
+policy with a frozen backbone (``backbone`` in its config) trains without running it.
+
+Each (episode, camera) is the frame cache's frames (the decoded frames resized to the policy's
+image size by the antialiased resize the closed loop uses too) through the backbone up to its
+feature map at the stride: float32 (T, C, h, w) in
+``DATASET/.cache/features-<backbone>-s<stride>-<W>x<H>/<camera>/``. The frame cache's rules
+hold: a file is written under a temporary name and renamed into place, and its name carries the
+video file's size and modification time, so a dataset collected anew into the same folder is
+encoded anew. A file that does not read back as the array its name promises (cut short, another
+shape) is encoded again.
+
+No colour jitter: jittered frames would need a backbone pass per training step (or K encoded
+variants of every frame, K times the encoding and the disk), which is what the cache removes;
+and the station renders with fixed lighting, so evaluation frames have the training frames'
+colours. The features are those of the frames as recorded.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from rmbench.data.reader import Dataset
+from rmbench.data.torch_dataset import DemoDataset, FrameCache
+from rmbench.policies.nn.backbone import backbone_features, feature_shape
+
+log = logging.getLogger(__name__)
+
+FEATURES_PREFIX = "observation.features."
+# frames per backbone call: small batches run fastest on a CPU core, and up to 8 gave the
+# closed loop's single-step features bit for bit where measured
+ENCODE_BATCH = 8
+
+
+def features_key(camera: str) -> str:
+    """A training batch's key for ``camera``'s cached features."""
+    return FEATURES_PREFIX + camera
+
+
+class FeatureCache:
+    """Features of each (episode, camera) by ``backbone`` at ``stride`` of the frames resized
+    to ``size`` = (height, width), as .npy files, memory-mapped."""
+
+    def __init__(self, dataset: Dataset, backbone: str, stride: int, size: tuple[int, int],
+                 cache_dir: str | Path | None = None):
+        self.ds, self.backbone, self.stride = dataset, backbone, stride
+        self.size = (int(size[0]), int(size[1]))
+        self.shape = feature_shape(stride, self.size)
+        tag = f"features-{backbone}-s{stride}-{self.size[1]}x{self.size[0]}"
+        self.dir = Path(cache_dir) if cache_dir is not None else dataset.root / ".cache" / tag
+        self._open: dict[tuple[int, str], np.ndarray] = {}
+
+    def path(self, episode: int, camera: str) -> Path:
+        st = self.ds.video_path(camera, episode).stat()
+        return self.dir / camera / f"episode-{episode:06d}-{st.st_size}-{st.st_mtime_ns}.npy"
+
+    def features(self, episode: int, camera: str) -> np.ndarray:
+        """(T, C, h, w) float32, memory-mapped; encoded first if the cache lacks them."""
+        key = (episode, camera)
+        if key not in self._open:
+            self._open[key] = self._ensure(episode, camera)
+        return self._open[key]
+
+    def build(self, episodes: list[int], cameras: list[str]) -> None:
+        """Encode whatever the cache lacks of ``episodes`` x ``cameras`` now (before training
+        starts, so that data-loading workers only read); nothing is kept open."""
+        todo = [(e, c) for e in episodes for c in cameras
+                if self._read(self.path(e, c), e) is None]
+        for n, (e, c) in enumerate(todo):
+            if n % 20 == 0:
+                log.info("%s: encoding %d of %d episode videos", self.dir, n + 1, len(todo))
+            self._ensure(e, c)
+
+    def _ensure(self, episode: int, camera: str) -> np.ndarray:
+        path = self.path(episode, camera)
+        array = self._read(path, episode)
+        if array is None:
+            self._encode(episode, camera, path)
+            array = self._read(path, episode)
+            if array is None:
+                raise OSError(f"{path}: written, but does not read back as "
+                              f"{self._expected(episode)} float32")
+        return array
+
+    def _expected(self, episode: int) -> tuple[int, ...]:
+        return (int(self.ds.lengths[episode]), *self.shape)
+
+    def _read(self, path: Path, episode: int) -> np.ndarray | None:
+        """The cached array, or None when there is none or it is not what it should be."""
+        if not path.exists():
+            return None
+        try:
+            array = np.load(path, mmap_mode="r")
+        except (OSError, ValueError, EOFError):
+            return None
+        if array.shape != self._expected(episode) or array.dtype != np.float32:
+            return None
+        return array
+
+    def _encode(self, episode: int, camera: str, path: Path) -> None:
+        frames = FrameCache(self.ds, self.size).frames(episode, camera)
+        out = np.empty((len(frames), *self.shape), dtype=np.float32)
+        for i in range(0, len(frames), ENCODE_BATCH):
+            images = torch.from_numpy(np.array(frames[i:i + ENCODE_BATCH])).permute(0, 3, 1, 2)
+            out[i:i + ENCODE_BATCH] = backbone_features(self.backbone, self.stride, images).numpy()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npy")
+        np.save(tmp, out)
+        os.replace(tmp, path)
+
+
+class FeatureFrames(torch.utils.data.Dataset):
+    """The items of ``frames`` (a DemoDataset built without cameras) with each camera's cached
+    features at the frames they observe: ``observation.features.<camera>`` (C, h, w) float32,
+    (n, C, h, w) with a history. Samplers read its ``starts``, ``lengths`` and ``stride`` as
+    they read the DemoDataset's."""
+
+    def __init__(self, frames: DemoDataset, cache: FeatureCache, cameras: list[str]):
+        if frames.cameras:
+            raise ValueError("FeatureFrames reads features in place of frames: build the "
+                             "DemoDataset with cameras=[]")
+        self.frames, self.cache, self.cameras = frames, cache, list(cameras)
+        self.starts, self.lengths, self.stride = frames.starts, frames.lengths, frames.stride
+        cache.build(frames.episode_ids, self.cameras)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        item = self.frames[i]
+        k, t = self.frames.locate(int(i))
+        seen = self.frames.observed(t)
+        for cam in self.cameras:
+            array = self.cache.features(self.frames.episode_ids[k], cam)[seen]
+            item[features_key(cam)] = torch.from_numpy(np.array(array))
+        return item
+
+
+def with_features(frames: DemoDataset, ds: Dataset, cfg) -> torch.utils.data.Dataset:
+    """What a policy with config ``cfg`` trains on: ``frames`` itself, or with a frozen
+    backbone (``cfg.reads_features``) ``frames`` with the cameras' cached features."""
+    if not cfg.reads_features:
+        return frames
+    cache = FeatureCache(ds, cfg.backbone, cfg.backbone_stride, cfg.image_size)
+    return FeatureFrames(frames, cache, list(cfg.cameras))
