@@ -3,11 +3,17 @@ with the default camera set, Mem-0's planner latency, memory per step, and train
 (forward, backward and AdamW on a batch of 32) for each.
 
     python benchmarks/policy_speed.py [--steps 300] [--train-steps 20] [--task press_button]
+    python benchmarks/policy_speed.py --case backbone [--steps 100] [--train-steps 10]
 
 Models are the default configurations with random weights (speed does not depend on the
 weights). Observations are real renders of the task's station (three cameras at 320x240),
 resized by the policy as in evaluation. Training batches are built from the same renders.
 Prints a table and writes benchmarks/results/policy_speed.json.
+
+``--case backbone`` compares, on one thread, Mem-0's training steps/s at batch 32 with its
+CNNs (on frames, jittered) and with the frozen EfficientNet-Lite0 (on features as the cache
+holds them), the closed loop's step with the backbone in it (Mem-0, DP, ACT), and the cache's
+encoding rate, at strides 8, 16 and 32; it writes benchmarks/results/policy_speed_backbone.json.
 """
 
 from __future__ import annotations
@@ -31,14 +37,18 @@ from rmbench.policies.act.modeling import ACTModel, ACTTrainer
 from rmbench.policies.dp.agent import DPPolicy
 from rmbench.policies.dp.config import DPConfig
 from rmbench.policies.dp.modeling import DiffusionPolicyModel, DPTrainer
+from rmbench.policies.feature_cache import ENCODE_BATCH, features_key
 from rmbench.policies.mem0.agent import Mem0Policy
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
 from rmbench.policies.mem0.planner import DONE
 from rmbench.policies.mem0.train import goal_text
+from rmbench.policies.nn.backbone import EFFICIENTNET_LITE0, backbone_features
 from rmbench.tasks import get_task
 
 OUT = Path(__file__).parent / "results" / "policy_speed.json"
+OUT_BACKBONE = Path(__file__).parent / "results" / "policy_speed_backbone.json"
+STRIDES = (8, 16, 32)
 BATCH = 32
 
 
@@ -102,28 +112,118 @@ def train_speed(trainer, batch, steps: int) -> dict:
     return {"train_steps_per_s": round(steps / (time.perf_counter() - t0), 2)}
 
 
+def with_features(batch: dict[str, torch.Tensor], cfg) -> dict[str, torch.Tensor]:
+    """The batch with each camera's frames replaced by their backbone features (the cache's)."""
+    out = {k: v for k, v in batch.items() if not k.startswith("observation.images.")}
+    for cam in cfg.cameras:
+        images = batch[L.image_key(cam)]
+        out[features_key(cam)] = torch.cat([
+            backbone_features(cfg.backbone, cfg.backbone_stride, images[i:i + ENCODE_BATCH])
+            for i in range(0, len(images), ENCODE_BATCH)])
+    return out
+
+
+def mem0_describe(task) -> dict:
+    subtasks = list(task.subtasks)
+    return {"policy": "mem0", "task": task.name, "tmc": task.tmc,
+            "executor_texts": subtasks + [goal_text(task.name)],
+            "planner_texts": subtasks + [DONE], "text_encoder": "learned"}
+
+
+def backbone_case(task, frames, args) -> dict:
+    """One thread throughout: Mem-0's training with the CNNs against the frozen backbone's
+    cached features, the closed loop with the backbone in it, and the cache's encoding rate."""
+    torch.set_num_threads(1)
+    describe = mem0_describe(task)
+    decompose = task.tmc == "M(n)"
+
+    def mem0_trainer(cfg):
+        torch.manual_seed(0)
+        model = Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], None)
+        return Mem0Trainer(model, BATCH, decompose, 0)
+
+    cnn = Mem0Config()
+    images = batch_from(frames, cnn, 1, cnn.horizon)
+    results: dict = {"cnn": {"mem0": train_speed(mem0_trainer(cnn), images, args.train_steps)}}
+    results["cnn"]["mem0"].update(closed_loop(
+        Mem0Policy.from_model(mem0_trainer(cnn).model, describe), frames, args.steps))
+    for stride in STRIDES:
+        cfg = Mem0Config(backbone=EFFICIENTNET_LITE0, backbone_stride=stride)
+        features = with_features(images, cfg)
+        row = train_speed(mem0_trainer(cfg), features, args.train_steps)
+        row["feature_shape"] = list(features[features_key("head")].shape[1:])
+        torch.manual_seed(0)
+        model = Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], None)
+        row["mem0_params"] = sum(p.numel() for p in model.executor.parameters())
+        row["mem0"] = closed_loop(Mem0Policy.from_model(model, describe), frames, args.steps)
+        for name, (bcfg, model_cls, policy_cls) in {
+                "dp": (DPConfig(backbone=EFFICIENTNET_LITE0, backbone_stride=stride),
+                       DiffusionPolicyModel, DPPolicy),
+                "act": (ACTConfig(backbone=EFFICIENTNET_LITE0, backbone_stride=stride),
+                        ACTModel, ACTPolicy)}.items():
+            torch.manual_seed(0)
+            row[name] = closed_loop(policy_cls.from_model(model_cls(bcfg)), frames, args.steps)
+        # the backbone alone: three cameras in one batch, as the policies run it
+        policy = Mem0Policy.from_model(model, describe)
+        n, t0 = 50, time.perf_counter()
+        for k in range(n):
+            policy.inputs(frames[k % len(frames)])
+        row["inputs_ms"] = round(1000 * (time.perf_counter() - t0) / n, 2)
+        # the cache's encoding rate (frames already resized, in ENCODE_BATCH batches)
+        head = images[L.image_key("head")]
+        t0 = time.perf_counter()
+        for i in range(0, len(head), ENCODE_BATCH):
+            backbone_features(cfg.backbone, stride, head[i:i + ENCODE_BATCH])
+        row["encode_frames_per_s"] = round(len(head) / (time.perf_counter() - t0), 1)
+        results[f"stride{stride}"] = {"mem0": {"train_steps_per_s": row.pop("train_steps_per_s"),
+                                               "params": row.pop("mem0_params"),
+                                               **row.pop("mem0")}, **row}
+    result = {"task": task.name, "cameras": list(cnn.cameras), "image_size": list(cnn.image_size),
+              "threads": 1, "batch_size": BATCH, "steps": args.steps,
+              "train_steps": args.train_steps, "results": results}
+    print(f"one thread; Mem-0 with its CNNs: training at batch {BATCH} on frames "
+          f"{results['cnn']['mem0']['train_steps_per_s']:.2f} steps/s, closed-loop step "
+          f"{results['cnn']['mem0']['step_ms']:.1f} ms; with the frozen backbone:")
+    print(f"{'stride':<8}{'features':>14}{'train steps/s':>15}{'inputs':>10}{'Mem-0 step':>12}"
+          f"{'DP step':>10}{'ACT step':>10}{'encode':>14}")
+    for stride in STRIDES:
+        r = results[f"stride{stride}"]
+        print(f"{stride:<8}{'x'.join(map(str, r['feature_shape'])):>14}"
+              f"{r['mem0']['train_steps_per_s']:>15.2f}{r['inputs_ms']:>7.1f} ms"
+              f"{r['mem0']['step_ms']:>9.1f} ms{r['dp']['step_ms']:>7.1f} ms"
+              f"{r['act']['step_ms']:>7.1f} ms{r['encode_frames_per_s']:>8.0f} fr/s")
+    OUT_BACKBONE.parent.mkdir(parents=True, exist_ok=True)
+    OUT_BACKBONE.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {OUT_BACKBONE}")
+    return result
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps", type=int, default=300)
     ap.add_argument("--train-steps", type=int, default=20)
     ap.add_argument("--task", default="press_button")
+    ap.add_argument("--case", choices=("all", "backbone"), default="all")
     args = ap.parse_args()
     cores = len(os.sched_getaffinity(0))
     task = get_task(args.task)
     env = rmbench.make(task.name, cameras=Mem0Config().cameras)
     obs, info = env.reset(seed=100000)
     frames = [obs]
-    for _ in range(20):  # a few distinct frames to cycle through
-        obs, *_ = env.step(env.action_space.sample())
+    env.action_space.seed(0)
+    for k in range(20):  # a few distinct frames to cycle through
+        obs, _, terminated, truncated, _ = env.step(env.action_space.sample())
         frames.append(obs)
+        if terminated or truncated:  # a random action can end the episode (a failure)
+            obs, _ = env.reset(seed=100001 + k)
     env.close()
+    if args.case == "backbone":
+        backbone_case(task, frames, args)
+        return
 
     # --- Mem-0
     cfg = Mem0Config()
-    subtasks = list(task.subtasks)
-    describe = {"policy": "mem0", "task": task.name, "tmc": task.tmc,
-                "executor_texts": subtasks + [goal_text(task.name)],
-                "planner_texts": subtasks + [DONE], "text_encoder": "learned"}
+    describe = mem0_describe(task)
     torch.manual_seed(0)
     model = Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], None)
     policy = Mem0Policy.from_model(model, describe)
@@ -134,7 +234,7 @@ def main() -> None:
     planner_cams = policy.planner_inputs(imgs)
     with torch.no_grad():  # the planner with a full key memory of 8 finished subtasks
         policy.first = model.planner.embed(planner_cams)
-        policy.keys = [(k % len(subtasks), model.planner.embed(planner_cams)[0]) for k in range(8)]
+        policy.keys = [(k % len(task.subtasks), model.planner.embed(planner_cams)[0]) for k in range(8)]
         for _ in range(3):
             policy.subtask_ended(imgs)
         n, t0 = 20, time.perf_counter()
