@@ -229,6 +229,20 @@ def test_action_patches_carry_consecutive_actions():
     with pytest.raises(ValueError, match="action_patch"):
         Mem0Config(horizon=30, action_patch=4)
 
+
+def test_a_run_from_before_a_config_field_resumes_with_its_default(dataset, tmp_path,
+                                                                   interrupt_training):
+    interrupt_training(lambda: train_tiny(dataset, tmp_path / "r", steps=6))
+    path = tmp_path / "r" / "training" / "state.pt"
+    state = torch.load(path, weights_only=True)
+    identity = json.loads(state["identity"])
+    del identity["describe"]["config"]["ema"]  # as a run saved before the field existed
+    state["identity"] = json.dumps(identity, sort_keys=True)
+    torch.save(state, path)
+    with pytest.raises(TrainingError, match=r"\(describe.config.ema False there, True asked\)"):
+        train_tiny(dataset, tmp_path / "r", steps=6, cfg=replace(TINY, ema=True))
+    assert train_tiny(dataset, tmp_path / "r", steps=6)["resumed_from"] == 3
+
 # ------------------------------------------------------------------ checkpoints and the loop
 def test_checkpoint_round_trip_gives_identical_actions(mn_ckpt):
     env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)

@@ -218,7 +218,7 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
         return batch_stream(frames, sampler, start, workers)
 
     return train(trainer, batches, train_cfg, out, describe, progress,
-                 write_checkpoint=save_checkpoint)
+                 write_checkpoint=save_checkpoint, config_defaults=type(cfg)().to_dict())
 
 
 class VisuomotorPolicy(BasePolicy):

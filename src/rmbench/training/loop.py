@@ -101,10 +101,13 @@ CheckpointWriter = Callable[[Path, nn.Module, dict[str, Any], int], None]
 
 def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | Path,
           describe: dict[str, Any], progress: bool = True, *,
-          write_checkpoint: CheckpointWriter) -> dict[str, Any]:
+          write_checkpoint: CheckpointWriter,
+          config_defaults: dict[str, Any] | None = None) -> dict[str, Any]:
     """Train ``model`` for ``cfg.steps`` steps into ``out``; ``describe`` is what the
     inference checkpoint's config.json holds (and what a resume must match), and
-    ``write_checkpoint`` writes that checkpoint at each save."""
+    ``write_checkpoint`` writes that checkpoint at each save. ``config_defaults``: the
+    defaults of the policy config in ``describe["config"]``; a run saved before a field
+    existed ran with its default, so it resumes when that default is asked for."""
     out = Path(out)
     dist = Dist.from_env()
     if dist.world > 1 and not torch.distributed.is_initialized():
@@ -122,7 +125,8 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     # as JSON stores it (tuples become lists), so that a resume compares like with like
     identity = json.loads(json.dumps({"describe": describe, "train": asdict(cfg),
                                       "world": dist.world}))
-    start = _resume(out, model, opt, identity, device)
+    defaults = json.loads(json.dumps(config_defaults or {}))
+    start = _resume(out, model, opt, identity, defaults, device)
     if start >= cfg.steps:
         log.info("%s: already trained for %d steps", out, start)
         return {"steps": start, "resumed_from": start}
@@ -187,7 +191,7 @@ def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dic
 
 
 def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict,
-            device: torch.device) -> int:
+            config_defaults: dict, device: torch.device) -> int:
     path = out / STATE
     if not path.exists():
         if (out / "config.json").exists() or (out.exists() and any(out.iterdir())):
@@ -198,7 +202,10 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
     except Exception as err:
         raise TrainingError(f"{path}: unreadable training state ({type(err).__name__}: "
                             f"{str(err).splitlines()[0] if str(err) else ''})") from None
-    what = differences(json.loads(state["identity"]), identity)
+    saved = json.loads(state["identity"])
+    if isinstance(saved.get("describe", {}).get("config"), dict):
+        saved["describe"]["config"] = {**config_defaults, **saved["describe"]["config"]}
+    what = differences(saved, identity)
     if what:
         raise TrainingError(f"{out} holds a training run with other arguments ({what}); "
                             f"use another --out")

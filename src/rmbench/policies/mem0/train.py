@@ -114,7 +114,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         return batch_stream(frames, sampler, start, workers)
 
     result = train(trainer, batches, train_cfg, out, describe, progress,
-                   write_checkpoint=save_checkpoint)
+                   write_checkpoint=save_checkpoint, config_defaults=type(cfg)().to_dict())
     if planner_report is not None:
         write_atomic(out / "training" / "planner.json",
                      (json.dumps(planner_report, indent=2) + "\n").encode())
