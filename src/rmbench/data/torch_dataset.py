@@ -33,8 +33,7 @@ class FrameCache:
         self._open: dict[tuple[int, str], np.ndarray] = {}
 
     def _path(self, episode: int, camera: str) -> Path:
-        st = self.ds.video_path(camera, episode).stat()
-        return self.dir / camera / f"episode-{episode:06d}-{st.st_size}-{st.st_mtime_ns}.npy"
+        return cache_file(self.dir, self.ds, episode, camera)
 
     def frames(self, episode: int, camera: str) -> np.ndarray:
         """(T, H, W, 3) uint8, memory-mapped."""
@@ -45,12 +44,25 @@ class FrameCache:
                 frames = self.ds.episode(episode, cameras=[camera]).frames[camera]
                 if self.size is not None and frames.shape[1:3] != self.size:
                     frames = resize(frames, self.size)
-                path.parent.mkdir(parents=True, exist_ok=True)
-                tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npy")
-                np.save(tmp, frames)
-                os.replace(tmp, path)
+                save_atomic(path, frames)
             self._open[key] = np.load(path, mmap_mode="r")
         return self._open[key]
+
+
+def cache_file(directory: Path, dataset: Dataset, episode: int, camera: str) -> Path:
+    """Where a cache of per-(episode, camera) arrays keeps one: the video file's size and
+    modification time are in the name, so a dataset collected anew into the same folder is
+    never served stale arrays."""
+    st = dataset.video_path(camera, episode).stat()
+    return directory / camera / f"episode-{episode:06d}-{st.st_size}-{st.st_mtime_ns}.npy"
+
+
+def save_atomic(path: Path, array: np.ndarray) -> None:
+    """np.save under a temporary name, then renamed into place: readers never see half a file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npy")
+    np.save(tmp, array)
+    os.replace(tmp, path)
 
 
 def resize(frames: np.ndarray, size: tuple[int, int]) -> np.ndarray:

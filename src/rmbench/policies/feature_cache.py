@@ -19,14 +19,13 @@ colours. The features are those of the frames as recorded.
 from __future__ import annotations
 
 import logging
-import os
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from rmbench.data.reader import Dataset
-from rmbench.data.torch_dataset import DemoDataset, FrameCache
+from rmbench.data.torch_dataset import DemoDataset, FrameCache, cache_file, save_atomic
 from rmbench.policies.nn.backbone import backbone_features, feature_shape
 
 log = logging.getLogger(__name__)
@@ -56,8 +55,7 @@ class FeatureCache:
         self._open: dict[tuple[int, str], np.ndarray] = {}
 
     def path(self, episode: int, camera: str) -> Path:
-        st = self.ds.video_path(camera, episode).stat()
-        return self.dir / camera / f"episode-{episode:06d}-{st.st_size}-{st.st_mtime_ns}.npy"
+        return cache_file(self.dir, self.ds, episode, camera)
 
     def features(self, episode: int, camera: str) -> np.ndarray:
         """(T, C, h, w) float32, memory-mapped; encoded first if the cache lacks them."""
@@ -108,10 +106,7 @@ class FeatureCache:
         for i in range(0, len(frames), ENCODE_BATCH):
             images = torch.from_numpy(np.array(frames[i:i + ENCODE_BATCH])).permute(0, 3, 1, 2)
             out[i:i + ENCODE_BATCH] = backbone_features(self.backbone, self.stride, images).numpy()
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npy")
-        np.save(tmp, out)
-        os.replace(tmp, path)
+        save_atomic(path, out)
 
 
 class FeatureFrames(torch.utils.data.Dataset):
