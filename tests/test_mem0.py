@@ -424,3 +424,37 @@ def test_state_mem0_through_the_evaluation_harness(mn_state_ckpt, tmp_path):
                         progress=False, seed_cache=tmp_path / "seeds"))
     (rec,) = read_records(tmp_path / "e" / "press_button" / "episodes.jsonl")
     assert rec["reason"] in ("success", "task_failure", "timeout"), rec
+
+
+def test_state_noise_moves_object_positions_only(dataset):
+    """state_noise perturbs the environment state's *_x/_y/_z entries of what the encoder reads
+    in training, nothing else, by about the asked std; without it the inputs are untouched."""
+    from rmbench.data import layout as L
+    from rmbench.data.torch_dataset import EpisodeOrderSampler
+    from rmbench.policies.mem0.modeling import Mem0Trainer
+    from rmbench.policies.mem0.train import Mem0Frames, build_model, goal_text
+    from rmbench.training.batches import batch_stream
+
+    ds = Dataset(dataset)
+    names = ds.state_names
+    texts = list(ds.subtasks) + [goal_text(ds.task)]
+    describe = {"executor_texts": texts, "planner_texts": list(ds.subtasks) + ["done"],
+                "text_encoder": "learned", "state_names": names}
+    frames = Mem0Frames(ds, TINY_STATE, False, len(texts) - 1)
+    batch = next(batch_stream(frames, EpisodeOrderSampler(frames, 64, seed=0), 0))
+    position = torch.tensor([n.endswith(("_x", "_y", "_z")) for n in names])
+    assert position.any() and not position.all()
+    for noise in (0.0, 0.01):
+        cfg = replace(TINY_STATE, state_noise=noise)
+        model = build_model(cfg, describe)
+        seen = []
+        encode = model.executor.encode
+        model.executor.encode = lambda inputs, encode=encode, seen=seen: (seen.append(inputs),
+                                                                       encode(inputs))[1]
+        Mem0Trainer(model, 64, False, 0, names)(batch)
+        delta = seen[0][0] - batch[L.ENV_STATE]
+        assert torch.equal(seen[0][1], batch[L.STATE])
+        assert torch.equal(delta[:, ~position], torch.zeros_like(delta[:, ~position]))
+        assert float(delta[:, position].std()) == pytest.approx(noise, rel=0.1, abs=1e-9)
+    with pytest.raises(ValueError, match="state_noise"):
+        replace(TINY_STATE, state_noise=-0.01)

@@ -27,6 +27,7 @@ from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
 
 ACTION_DIM = 14
+POSITION_SUFFIXES = ("_x", "_y", "_z")  # environment-state entries that are positions (metres)
 
 
 class Executor(nn.Module):
@@ -89,11 +90,16 @@ class Mem0Trainer(nn.Module):
     """The executor's training step over episode-ordered batches: one memory slot per batch
     slot, reset at episode starts and (for M(n) tasks) at subtask changes."""
 
-    def __init__(self, model: Mem0Model, batch_size: int, decompose: bool, seed: int):
+    def __init__(self, model: Mem0Model, batch_size: int, decompose: bool, seed: int,
+                 state_names: list[str] | tuple[str, ...] = ()):
         super().__init__()
         self.model = model
         self.decompose = decompose
         cfg = model.cfg
+        # the environment state's object positions, where state_noise applies
+        self.noise_scale = (torch.tensor([cfg.state_noise if n.endswith(POSITION_SUFFIXES) else 0.0
+                                          for n in state_names])
+                            if cfg.reads_state and cfg.state_noise > 0 else None)
         self.memory = MemoryStore(batch_size, cfg.step_tokens, cfg.sliding_window, cfg.dim)
         self.last_subtask = torch.full((batch_size,), -1, dtype=torch.long)
         self.generator = torch.Generator().manual_seed(seed)
@@ -120,7 +126,12 @@ class Mem0Trainer(nn.Module):
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
         ex, cfg = self.model.executor, self.model.cfg
-        tokens, z = ex.encode(step_inputs(batch, cfg, cfg.cameras, self.generator))
+        inputs = step_inputs(batch, cfg, cfg.cameras, self.generator)
+        if self.noise_scale is not None:
+            env_state = inputs[0]
+            noise = torch.randn(env_state.shape, generator=self.generator)
+            inputs[0] = env_state + (noise * self.noise_scale).to(env_state)
+        tokens, z = ex.encode(inputs)
         subtask = batch[L.SUBTASK_INDEX]
         reset = batch["episode_start"].bool()
         if self.decompose:

@@ -106,7 +106,8 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     planner_report = None
     if decompose and not (out / STATE).exists():
         planner_report = fit_planner(model, ds, cfg, train_cfg, planner_texts.index(DONE), progress)
-    trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed)
+    trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed,
+                          describe.get("state_names", ()))
     frames = with_features(Mem0Frames(ds, cfg, decompose, executor_texts.index(goal)), ds, cfg)
 
     def batches(start: int, rank: int, world: int):
