@@ -141,8 +141,12 @@ def test_observe_and_pickup_screen_stillness_and_wrong_object():
     for _ in range(19):
         env.step(home)
     assert not task.screen_up
+    visible = task.state_names.index("reference_visible")
+    assert task.environment_state()[visible] == 1.0
     env.step(home)
     assert task.screen_up  # one second in
+    # the screen is drawn (and the state shows it) from the step that raised it
+    assert task.environment_state()[visible] == 0.0
     env, task = task_env("observe_and_pickup", seed=9)
     moved = home.copy()
     moved[0] += 0.5  # swing the left waist

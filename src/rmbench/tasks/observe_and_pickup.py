@@ -27,6 +27,7 @@ looks the same whatever the reference was.
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 
 from rmbench.sim.fixtures import Wall
@@ -151,7 +152,7 @@ class ObserveAndPickup(Task):
     def environment_state(self) -> np.ndarray:
         d, shapes, colours = self.data, list(SHAPES), list(SHAPE_COLOURS)
         # The screen as the cameras draw it: it stands once its body has come up from under
-        # the floor (a step after ``screen_up`` when it rises on the period's last substep).
+        # the floor (on_substep updates the drawn pose at once).
         visible = 0.0 if d.xpos[self.screen.body_id][2] > 0 else 1.0
         return S.assemble(self.state_names, [
             *((S.pose(o, d, S.SHAPE_SYMMETRY[o.shape]), S.one_hot(o.shape, shapes),
@@ -168,6 +169,10 @@ class ObserveAndPickup(Task):
                 self.data.time - self.t0 >= OBSERVE_SECONDS:
             self.screen.show(self.model, SCREEN_XY)
             self.screen_up = True
+            # Moving a body changes where it is drawn only at the next mj_step's kinematics: a
+            # screen raised on a period's last substep would appear a frame after screen_up.
+            # Kinematics alone leaves the dynamics as they were (the next step recomputes it).
+            mujoco.mj_kinematics(self.model, self.data)
 
     def lift(self, obj: Shape) -> float:
         return float(obj.pos(self.data)[2] - obj.rest_height - TABLE_TOP)
