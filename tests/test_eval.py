@@ -121,6 +121,19 @@ def test_replay_of_a_dataset_succeeds_on_its_own_seeds(dataset, tmp_path):
     assert [r["seed"] for r in records(tmp_path)] == [0, 1, 2]
 
 
+def test_seeds_of_a_dataset_runs_its_layouts(dataset, tmp_path):
+    """--seeds-of: the demonstrations' own seeds (the layouts a policy trained on), named in
+    run.json; a dataset of another task is a one-line error."""
+    summary = evaluate(cfg(tmp_path / "a", policy="expert", episodes=2, seeds_of=dataset))
+    assert summary["tasks"][TASK]["successes"] == 2
+    assert [r["seed"] for r in records(tmp_path / "a")] == [0, 1]
+    run = json.loads((tmp_path / "a" / "out" / "run.json").read_text())
+    assert run["seeds_of"] == str(dataset.resolve())
+    with pytest.raises(EvalError, match=f"holds {TASK} demonstrations, not put_back_block"):
+        evaluate(EvalConfig(("put_back_block",), "expert", tmp_path / "b", seeds_of=dataset,
+                            progress=False, video="none"))
+
+
 def test_unknown_policy_lists_the_known_ones(tmp_path):
     with pytest.raises(UnknownPolicyError,
                        match=r"unknown policy 'pi0'.*expert.*replay:ARG.*dp:ARG.*act:ARG"):

@@ -162,7 +162,8 @@ def cmd_eval(args) -> int:
         raise ValueError("name a task with --task, or --all")
     cfg = EvalConfig(tuple(tasks), args.policy, args.out, episodes=args.episodes, seed=args.seed,
                      workers=args.workers, backend=args.backend, video=args.video,
-                     instructions=args.instructions, progress=not args.json)
+                     instructions=args.instructions, progress=not args.json,
+                     seeds_of=args.seeds_of)
     summary = evaluate(cfg)
     if args.json:
         print(json.dumps(summary, indent=2))
@@ -288,6 +289,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--seed", type=int, default=0,
                    help="evaluation seed s: episodes from 100000 * (1 + s) up")
+    p.add_argument("--seeds-of", metavar="DATASET",
+                   help="run the seeds DATASET's demonstrations were recorded on instead (the "
+                        "layouts a policy trained on: its score there against --seed's held-out "
+                        "layouts is what it memorised)")
     p.add_argument("--out", required=True, help="results folder (resumed if it exists)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--backend", choices=["local", "ray"], default="local")

@@ -55,6 +55,9 @@ class EvalConfig:
     instructions: str = "seen"
     progress: bool = True
     seed_cache: str | Path | None = None
+    seeds_of: str | Path | None = None
+    """A dataset: run its demonstrations' seeds (the layouts a policy trained on, beside the
+    held-out ones ``seed`` picks: the gap is what the policy memorised) instead of ``seed``'s."""
 
     def __post_init__(self):
         if not self.tasks:
@@ -81,8 +84,11 @@ class EvalConfig:
         return index < int(m.group(1))
 
     def identity(self) -> dict[str, Any]:
-        return {"policy": self.policy, "seed": self.seed, "episodes": self.episodes,
-                "instructions": self.instructions}
+        ident = {"policy": self.policy, "seed": self.seed, "episodes": self.episodes,
+                 "instructions": self.instructions}
+        if self.seeds_of is not None:  # (absent otherwise: earlier run.json files stay valid)
+            ident["seeds_of"] = str(Path(self.seeds_of).resolve())
+        return ident
 
 
 def read_records(path: Path) -> list[dict]:
@@ -156,16 +162,26 @@ def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
     # one executor for the seed search and the episodes: its workers keep their env
     executor = make_executor(cfg.workers, cfg.backend, on_close=close_worker)
     try:
-        if entry.name == "replay":
-            from rmbench.data.reader import Dataset
-
-            seeds = [int(r["rmbench/seed"]) for r in Dataset(arg).episodes][: cfg.episodes]
+        if entry.name == "replay" or cfg.seeds_of is not None:
+            seeds = dataset_seeds(arg if entry.name == "replay" else cfg.seeds_of, task)
+            seeds = seeds[: cfg.episodes]
         else:
             seeds = verified_seeds(task, cfg.seed, cfg.episodes, cfg.seed_cache, executor,
                                    progress=cfg.progress)
         return _run_episodes(cfg, task, folder, seeds, executor)
     finally:
         executor.shutdown()
+
+
+def dataset_seeds(path: str | Path, task: str) -> list[int]:
+    """The seeds a dataset of ``task`` was recorded on, in episode order (a one-line error for
+    a dataset of another task)."""
+    from rmbench.data.reader import Dataset
+
+    ds = Dataset(path)
+    if ds.task != task:
+        raise EvalError(f"{path} holds {ds.task} demonstrations, not {task}")
+    return [int(r["rmbench/seed"]) for r in ds.episodes]
 
 
 def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
