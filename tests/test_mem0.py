@@ -458,3 +458,9 @@ def test_state_noise_moves_object_positions_only(dataset):
         assert float(delta[:, position].std()) == pytest.approx(noise, rel=0.1, abs=1e-9)
     with pytest.raises(ValueError, match="state_noise"):
         replace(TINY_STATE, state_noise=-0.01)
+    # state_noise_on narrows it to the entries with those name prefixes
+    model = build_model(replace(TINY_STATE, state_noise=0.01, state_noise_on=("object0_",)), describe)
+    trainer = Mem0Trainer(model, 64, False, 0, names)
+    chosen = torch.tensor([n.startswith("object0_") for n in names]) & position
+    assert chosen.any() and (position & ~chosen).any()
+    assert torch.equal(trainer.noise_scale != 0, chosen)

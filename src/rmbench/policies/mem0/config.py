@@ -41,6 +41,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     every training frame, so also to what the memories store. Fifty demonstrations are fifty
     layouts, and a layout known to the millimetre names its demonstration: the noise makes the
     policy read positions as a centimetre-scale map, not an episode's identity."""
+    state_noise_on: tuple[str, ...] = ()
+    """Name prefixes of the position entries ``state_noise`` applies to (empty: all of them),
+    e.g. ("mat_", "button_") to blur the layout and keep the cube exact."""
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
     """Cameras the executor reads, each through its own CNN."""
     image_size: tuple[int, int] = (96, 128)

@@ -97,8 +97,10 @@ class Mem0Trainer(nn.Module):
         self.decompose = decompose
         cfg = model.cfg
         # the environment state's object positions, where state_noise applies
-        self.noise_scale = (torch.tensor([cfg.state_noise if n.endswith(POSITION_SUFFIXES) else 0.0
-                                          for n in state_names])
+        noisy = [n.endswith(POSITION_SUFFIXES) and
+                 (not cfg.state_noise_on or n.startswith(tuple(cfg.state_noise_on)))
+                 for n in state_names]
+        self.noise_scale = (torch.tensor([cfg.state_noise * k for k in noisy])
                             if cfg.reads_state and cfg.state_noise > 0 else None)
         self.memory = MemoryStore(batch_size, cfg.step_tokens, cfg.sliding_window, cfg.dim)
         self.last_subtask = torch.full((batch_size,), -1, dtype=torch.long)
