@@ -101,6 +101,11 @@ def left_to_right(pieces, data) -> list:
                                          float(data.xpos[p.body_id][1])))
 
 
+def is_position(name: str) -> bool:
+    """A coordinate of a piece's position, in metres (``*_x``, ``*_y``, ``*_z``)."""
+    return name.rsplit("_", 1)[-1] in ("x", "y", "z")
+
+
 def is_continuous(name: str) -> bool:
     """A position, heading or depth (jitters from episode to episode); the rest (flags,
     one-hots, RGB, digits) takes a few exact values."""
@@ -120,7 +125,7 @@ def bounds(names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     low, high = np.zeros(len(names)), np.ones(len(names))
     for i, name in enumerate(names):
         last = name.rsplit("_", 1)[-1]
-        if last in ("x", "y", "z"):
+        if is_position(name):
             low[i], high[i] = -5.0, 5.0
         elif name.endswith("yaw"):  # ..._cos_yaw, ..._sin4yaw, ..._coskyaw
             low[i] = -1.0

@@ -25,9 +25,9 @@ from rmbench.policies.mem0.planner import Planner
 from rmbench.policies.nn.ema import EMA
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
+from rmbench.tasks.state import is_position
 
 ACTION_DIM = 14
-POSITION_SUFFIXES = ("_x", "_y", "_z")  # environment-state entries that are positions (metres)
 
 
 class Executor(nn.Module):
@@ -97,7 +97,7 @@ class Mem0Trainer(nn.Module):
         self.decompose = decompose
         cfg = model.cfg
         # the environment state's object positions, where state_noise applies
-        noisy = [n.endswith(POSITION_SUFFIXES) and
+        noisy = [is_position(n) and
                  (not cfg.state_noise_on or n.startswith(tuple(cfg.state_noise_on)))
                  for n in state_names]
         self.noise_scale = (torch.tensor([cfg.state_noise * k for k in noisy])
