@@ -285,6 +285,35 @@ def test_state_baseline_trains_without_frames(name, dataset, tmp_path, monkeypat
     assert np.mean(rows[-10:]) < ratio * np.mean(rows[:5]), (rows[:5], rows[-10:])
 
 
+@pytest.mark.parametrize("name", sorted(BASELINES))
+def test_state_noise_reaches_the_baselines_encoder(name, dataset):
+    """DP and ACT train with Mem-0's state_noise: the encoder reads the environment state's
+    chosen position entries moved by about the asked std, every other entry exactly."""
+    from rmbench.data.reader import Dataset
+    from rmbench.policies.act.modeling import ACTModel, ACTTrainer
+    from rmbench.policies.dp.modeling import DiffusionPolicyModel, DPTrainer
+    from rmbench.training.batches import batch_stream
+
+    ds = Dataset(dataset)
+    names = tuple(ds.state_names)
+    cfg = replace(state_cfg(name), state_noise=0.01, state_noise_on=("object0_",))
+    model_cls, trainer_cls = {"dp": (DiffusionPolicyModel, DPTrainer),
+                              "act": (ACTModel, ACTTrainer)}[name]
+    model = model_cls(cfg, len(names))
+    frames = DemoDataset(ds, chunk=cfg.horizon, cameras=[], history=cfg.obs_steps,
+                         environment_state=True)
+    batch = next(batch_stream(frames, RandomFrameSampler(frames, 64, seed=0), 0))
+    seen = []
+    model.observe = lambda inputs, state: (seen.append(inputs[0]), torch.zeros(len(state), 1))[1]
+    trainer_cls(model, 0, names).observe(batch)
+    delta = seen[0] - batch[L.ENV_STATE].reshape(seen[0].shape)
+    chosen = torch.tensor([n.startswith("object0_") and n.endswith(("_x", "_y", "_z"))
+                           for n in names])
+    assert chosen.any() and not chosen.all()
+    assert torch.equal(delta[:, ~chosen], torch.zeros_like(delta[:, ~chosen]))
+    assert float(delta[:, chosen].std()) == pytest.approx(0.01, rel=0.15)
+
+
 def test_state_checkpoint_round_trip_and_the_pixel_observation_error(state_ckpt):
     name, path = state_ckpt
     policy_cls = BASELINES[name][2]

@@ -29,6 +29,7 @@ import torch
 from rmbench.data import layout as L
 from rmbench.data.torch_dataset import resize
 from rmbench.policies.nn.backbone import CNN, backbone_features, check_backbone
+from rmbench.tasks.state import is_position
 
 PIXELS, STATE, AUTO = "pixels", "state", "auto"
 OBSERVATIONS = (AUTO, PIXELS, STATE)
@@ -57,10 +58,21 @@ class ReadsObservation:
     backbone_stride: int = 16
     """The backbone's feature map: its output stride, one of 2, 4, 8, 16, 32 (at 96x128,
     stride 16 is a 6x8 map of 112 channels)."""
+    state_noise: float = 0.0
+    """With observation "state", training only: std (metres) of Gaussian noise added to every
+    object position of the environment state (the entries named ``*_x``, ``*_y``, ``*_z``) at
+    every training frame (for Mem-0 also to what its memories store). Fifty demonstrations
+    are fifty layouts, and a layout known to the millimetre names its demonstration: the noise
+    makes the policy read positions as a centimetre-scale map, not an episode's identity."""
+    state_noise_on: tuple[str, ...] = ()
+    """Name prefixes of the position entries ``state_noise`` applies to (empty: all of them),
+    e.g. ("mat_",) to blur the layout and keep the cube and the button exact."""
 
     def __post_init__(self):
         super().__post_init__()
         check_backbone(self.backbone, self.backbone_stride)
+        if not self.state_noise >= 0:
+            raise ValueError(f"state_noise must be >= 0, got {self.state_noise}")
 
     @property
     def reads_state(self) -> bool:
@@ -97,6 +109,25 @@ def choose(requested: str, ds) -> str:
         raise ValueError(f"{ds.root} has no camera videos: train on the state "
                          f"(--set observation=state)")
     return choice
+
+
+def state_noise_scale(cfg: ReadsObservation, state_names) -> torch.Tensor | None:
+    """Per-entry std of ``cfg.state_noise`` over the environment state's ``state_names``
+    (zero where it does not apply), or None when no noise is asked for."""
+    if not (cfg.reads_state and cfg.state_noise > 0):
+        return None
+    prefixes = tuple(cfg.state_noise_on)
+    return torch.tensor([cfg.state_noise if is_position(n) and (not prefixes or n.startswith(prefixes))
+                         else 0.0 for n in state_names])
+
+
+def add_state_noise(env_state: torch.Tensor, scale: torch.Tensor | None,
+                    generator: torch.Generator) -> torch.Tensor:
+    """``env_state`` (..., D) plus N(0, ``scale``) per entry (unchanged when scale is None)."""
+    if scale is None:
+        return env_state
+    noise = torch.randn(env_state.shape, generator=generator)
+    return env_state + (noise * scale).to(env_state)
 
 
 def image_tensors(observation: dict[str, Any], cameras: tuple[str, ...],

@@ -40,10 +40,12 @@ from rmbench.policies.nn.state import StateEncoder
 from rmbench.policies.nn.vision import color_jitter
 from rmbench.policies.observation import (
     ReadsObservation,
+    add_state_noise,
     camera_inputs,
     check_observation,
     choose,
     state_inputs,
+    state_noise_scale,
     state_tensor,
 )
 from rmbench.tasks import get_task
@@ -125,13 +127,15 @@ def observation_encoder(cfg: VisuomotorConfig, state_dim: int, keypoints: int,
 
 class VisuomotorTrainer(nn.Module):
     """The training step's shared parts: jittered images (or cached backbone features) per
-    camera, flattened over the observation window, the two learning-rate groups, and the noise
-    generator carried across a resume. Subclasses implement ``forward(batch) -> (loss, logs)``."""
+    camera, or the states (with ``state_noise``), flattened over the observation window, the
+    two learning-rate groups, and the noise generator carried across a resume. Subclasses
+    implement ``forward(batch) -> (loss, logs)``."""
 
-    def __init__(self, model: nn.Module, seed: int):
+    def __init__(self, model: nn.Module, seed: int, state_names: tuple[str, ...] = ()):
         super().__init__()
         self.model = model
         self.generator = torch.Generator().manual_seed(seed)
+        self.noise_scale = state_noise_scale(model.cfg, state_names)
 
     def observe(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
         """The window's features (B, obs_steps, ...) through ``model.observe``."""
@@ -141,7 +145,8 @@ class VisuomotorTrainer(nn.Module):
             state = state[:, None]
         b, n = state.shape[:2]
         if cfg.reads_state:
-            inputs = [batch[L.ENV_STATE].reshape(b * n, -1), state.reshape(b * n, -1)]
+            env_state = add_state_noise(batch[L.ENV_STATE], self.noise_scale, self.generator)
+            inputs = [env_state.reshape(b * n, -1), state.reshape(b * n, -1)]
         elif cfg.reads_features:  # no jitter on cached features (feature_cache.py)
             inputs = [batch[features_key(cam)].flatten(0, -4) for cam in cfg.cameras]
         else:
@@ -206,7 +211,7 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
 
         stats = from_json(json.loads((ds.root / L.STATS).read_text()))
         model.encoders.set_stats(stats, L.ENV_STATE, L.STATE)
-    trainer = trainer_cls(model, train_cfg.seed)
+    trainer = trainer_cls(model, train_cfg.seed, tuple(ds.state_names or ()))
     frames = DemoDataset(ds, chunk=cfg.horizon,
                          cameras=[] if cfg.reads_state or cfg.reads_features else list(cfg.cameras),
                          image_size=cfg.image_size, history=cfg.obs_steps,

@@ -52,8 +52,8 @@ class DPTrainer(VisuomotorTrainer):
     """Noise-prediction MSE at a uniformly drawn DDPM step; the EMA of the weights is what the
     checkpoint holds (and what Diffusion Policy evaluates)."""
 
-    def __init__(self, model: DiffusionPolicyModel, seed: int):
-        super().__init__(model, seed)
+    def __init__(self, model: DiffusionPolicyModel, seed: int, state_names: tuple[str, ...] = ()):
+        super().__init__(model, seed, state_names)
         self.ema = EMA(model, model.cfg.ema_power, model.cfg.ema_max_decay)
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:

@@ -35,15 +35,6 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     """With observation "state": tokens per step (the anchor's slots, as cameras are with pixels)."""
     state_hidden: int = 256
     """With observation "state": hidden width of the state encoder's two layers."""
-    state_noise: float = 0.0
-    """With observation "state", training only: std (metres) of Gaussian noise added to every
-    object position of the environment state (the entries named ``*_x``, ``*_y``, ``*_z``) at
-    every training frame, so also to what the memories store. Fifty demonstrations are fifty
-    layouts, and a layout known to the millimetre names its demonstration: the noise makes the
-    policy read positions as a centimetre-scale map, not an episode's identity."""
-    state_noise_on: tuple[str, ...] = ()
-    """Name prefixes of the position entries ``state_noise`` applies to (empty: all of them),
-    e.g. ("mat_", "button_") to blur the layout and keep the cube exact."""
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
     """Cameras the executor reads, each through its own CNN."""
     image_size: tuple[int, int] = (96, 128)
@@ -136,8 +127,6 @@ class Mem0Config(ReadsObservation, PolicyConfig):
         check_observation(self.observation)
         if self.state_tokens < 1 or self.state_hidden < 1:
             raise ValueError("state_tokens and state_hidden must be >= 1")
-        if not self.state_noise >= 0:
-            raise ValueError(f"state_noise must be >= 0, got {self.state_noise}")
         if not self.cameras and not self.reads_state:
             raise ValueError("Mem-0 needs at least one camera")
         if not set(self.planner_cameras) <= set(self.cameras):

@@ -14,6 +14,7 @@ from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.nn.backbone import camera_encoders
 from rmbench.policies.nn.state import StateEncoder
 from rmbench.policies.nn.vision import color_jitter
+from rmbench.policies.observation import add_state_noise
 
 
 def observation_encoder(cfg: Mem0Config, cameras: int, state_dim: int) -> nn.Module:
@@ -26,12 +27,17 @@ def observation_encoder(cfg: Mem0Config, cameras: int, state_dim: int) -> nn.Mod
 
 
 def step_inputs(batch: dict[str, torch.Tensor], cfg: Mem0Config, cameras: tuple[str, ...],
-                generator: torch.Generator | None) -> list[torch.Tensor]:
+                generator: torch.Generator | None,
+                noise_scale: torch.Tensor | None = None) -> list[torch.Tensor]:
     """A training batch's inputs to ``observation_encoder``: the frames of ``cameras``
     (jittered when ``generator`` is given), their cached backbone features, or the
-    environment and joint states."""
+    environment state (plus ``state_noise``, per entry ``noise_scale``, when a generator is
+    given) and the joint state."""
     if cfg.reads_state:
-        return [batch[L.ENV_STATE], batch[L.STATE]]
+        env_state = batch[L.ENV_STATE]
+        if generator is not None:
+            env_state = add_state_noise(env_state, noise_scale, generator)
+        return [env_state, batch[L.STATE]]
     if cfg.reads_features:
         return [batch[features_key(cam)] for cam in cameras]
     images = [batch[L.image_key(cam)] for cam in cameras]

@@ -25,7 +25,7 @@ from rmbench.policies.mem0.planner import Planner
 from rmbench.policies.nn.ema import EMA
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
-from rmbench.tasks.state import is_position
+from rmbench.policies.observation import state_noise_scale
 
 ACTION_DIM = 14
 
@@ -96,12 +96,7 @@ class Mem0Trainer(nn.Module):
         self.model = model
         self.decompose = decompose
         cfg = model.cfg
-        # the environment state's object positions, where state_noise applies
-        noisy = [is_position(n) and
-                 (not cfg.state_noise_on or n.startswith(tuple(cfg.state_noise_on)))
-                 for n in state_names]
-        self.noise_scale = (torch.tensor([cfg.state_noise * k for k in noisy])
-                            if cfg.reads_state and cfg.state_noise > 0 else None)
+        self.noise_scale = state_noise_scale(cfg, state_names)
         self.memory = MemoryStore(batch_size, cfg.step_tokens, cfg.sliding_window, cfg.dim)
         self.last_subtask = torch.full((batch_size,), -1, dtype=torch.long)
         self.generator = torch.Generator().manual_seed(seed)
@@ -128,11 +123,7 @@ class Mem0Trainer(nn.Module):
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
         ex, cfg = self.model.executor, self.model.cfg
-        inputs = step_inputs(batch, cfg, cfg.cameras, self.generator)
-        if self.noise_scale is not None:
-            env_state = inputs[0]
-            noise = torch.randn(env_state.shape, generator=self.generator)
-            inputs[0] = env_state + (noise * self.noise_scale).to(env_state)
+        inputs = step_inputs(batch, cfg, cfg.cameras, self.generator, self.noise_scale)
         tokens, z = ex.encode(inputs)
         subtask = batch[L.SUBTASK_INDEX]
         reset = batch["episode_start"].bool()
