@@ -30,6 +30,7 @@ LAYERS: list[set[str]] = [
     {"training"},  # the loop and batch sources learned policies train with
     {"policies"},  # the policy interface, its spec registry, the built-in and learned policies
     {"eval"},  # the harness that runs a policy spec on expert-verified seeds
+    {"suite"},  # the benchmark's tables: collect, train and evaluate every cell
     {"serve"},  # the websocket policy server, and the remote: client policy
     {"cli"},  # the command line
 ]

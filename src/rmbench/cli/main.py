@@ -206,6 +206,33 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_table(args) -> int:
+    import shlex
+    from pathlib import Path
+
+    from rmbench.suite import runner, tables
+    from rmbench.suite.plan import ALL_POLICIES, Plan
+    from rmbench.tasks.registry import ordered
+
+    tasks = ([t.name for t in ordered()] if args.tasks == "all"
+             else [t.strip() for t in args.tasks.split(",") if t.strip()])
+    policies = [p.strip() for p in (args.policies or ",".join(ALL_POLICIES)).split(",") if p.strip()]
+    plan = Plan(args.obs, tuple(tasks), tuple(policies), demos=args.demos, steps=args.steps,
+                batch=args.batch, episodes=args.episodes, noise=args.noise,
+                noise_kind=args.noise_kind, sets=tuple(args.set or ()), video=args.video)
+    out = Path(args.out or f"runs/table_{args.obs}")
+    failed = runner.run(plan, out, jobs=args.jobs, backend=args.backend)
+    command = "rmbench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    tables.write(plan, out, command, {job.name: err for job, err in failed.items()})
+    print((out / "table.md").read_text())
+    print(f"wrote {out / 'table.md'} and {out / 'table.json'}")
+    if failed:
+        print(f"rmbench: {len(failed)} job(s) failed (logs in {out / 'logs'}); a re-run "
+              f"resumes what is missing", file=sys.stderr)
+        return 1
+    return 0
+
+
 def cmd_train(args) -> int:
     from rmbench.cli.train import run_training
 
@@ -335,6 +362,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--labels", nargs="+", metavar="NAME",
                    help="column names, one per DIR in order (default: the policy spec)")
     p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("table", help="the benchmark's tables in one resumable command: collect, "
+                       "train every policy and ablation, evaluate, report")
+    p.add_argument("--obs", choices=("state", "pixels"), required=True)
+    p.add_argument("--tasks", default="all", help="comma-separated task names, or all")
+    p.add_argument("--policies", default=None,
+                   help="comma-separated: mem0, mem0:ABLATION (no_anchor, no_sliding, "
+                        "no_memory, no_key, gt_classifier), dp, act (default: all of them; "
+                        "no_key and gt_classifier on M(n) tasks only)")
+    p.add_argument("--demos", type=int, default=50)
+    p.add_argument("--steps", type=int, default=3000)
+    p.add_argument("--batch", type=int, default=32)
+    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--noise", type=float, default=0.0,
+                   help="action noise executed during collection (DART), radians")
+    p.add_argument("--noise-kind", choices=("white", "smooth"), default="white")
+    p.add_argument("--set", action="append", metavar="FIELD=VALUE",
+                   help="override every policy config that has the field (VALUE as JSON)")
+    p.add_argument("--video", default="none", help="evaluation videos: first:K, failures, none")
+    p.add_argument("--out", default=None, help="the table's folder (default runs/table_<obs>)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="jobs at once (local: each a process with cores/jobs torch threads)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="ray: jobs on a Ray cluster (RAY_ADDRESS); --out on a shared file system")
+    p.set_defaults(func=cmd_table)
 
     p = sub.add_parser("serve", help="serve a policy over a websocket (msgpack-numpy)")
     p.add_argument("--policy", required=True, help="policy spec, e.g. random or replay:DATASET")

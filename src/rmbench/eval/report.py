@@ -58,17 +58,20 @@ def load_runs(folders: list[str | Path], labels: list[str] | None = None) -> lis
     return runs
 
 
-def table(runs: list[dict], published: list[str], metric: str = "success_rate"
-          ) -> tuple[list[str], list[list]]:
+def table(runs: list[dict], published: list[str], metric: str = "success_rate",
+          tasks: list[str] | None = None) -> tuple[list[str], list[list]]:
     """Header and rows: task, TMC, one value (%) of ``metric`` (success_rate or mean_progress)
-    per column; None where not evaluated. Published numbers exist for success rates only."""
+    per column; None where not evaluated. Published numbers exist for success rates only.
+    ``tasks`` keeps only those rows (default: all nine)."""
     published = published if metric == "success_rate" else []
     header = ["task", "TMC"] + [r["name"] for r in runs] + [f"{p} (published)" for p in published]
     rows: list[list] = []
     for group in ("M(1)", "M(n)"):
-        tasks = [c.name for c in ordered() if c.tmc == group]
+        names = [c.name for c in ordered() if c.tmc == group and (tasks is None or c.name in tasks)]
+        if not names:
+            continue
         group_rows = []
-        for t in tasks:
+        for t in names:
             vals = [100 * r["summary"]["tasks"][t][metric] if t in r["summary"]["tasks"]
                     else None for r in runs] + [PUBLISHED[p][t] for p in published]
             group_rows.append([t, group, *vals])

@@ -36,6 +36,24 @@ class PolicyConfig:
         return cls(**raw)
 
 
+def parse_overrides(config_cls: type[PolicyConfig], items: list[str]) -> dict[str, Any]:
+    """``--set FIELD=VALUE`` items as config keyword arguments (VALUE as JSON, else a bare
+    string); a field ``config_cls`` does not have is a ValueError listing those it has."""
+    names = {f.name for f in fields(config_cls)}
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set takes FIELD=VALUE, got {item!r}")
+        if key not in names:
+            raise ValueError(f"unknown config field {key!r}; fields: {', '.join(sorted(names))}")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value  # a bare string
+    return out
+
+
 def parse_argument(arg: str, config_cls: type[PolicyConfig], extra: tuple[str, ...] = ()
                    ) -> tuple[Path, dict[str, Any], dict[str, str]]:
     """``CKPT[?option=value&...]``: the checkpoint folder, the config overrides (the class's

@@ -1,0 +1,193 @@
+"""What a benchmark table is made of: its tasks, its policy columns, the recipe every policy
+trains with, and where each cell's data, checkpoint and evaluation live.
+
+A policy column is a spec: ``mem0``, ``mem0:ABLATION[+ABLATION...]``, ``dp`` or ``act``. Mem-0's
+trained ablations (``no_anchor``, ``no_sliding``, ``no_memory``, ``no_key``) train their own
+checkpoint; ``gt_classifier`` changes only inference, so ``mem0:gt_classifier`` evaluates the
+``mem0`` checkpoint. ``no_key`` and ``gt_classifier`` concern the planner and the subtask-end
+classifier, which an M(1) task (one subtask: the goal) does not have: those columns are left
+out of M(1) rows, as in the published ablation table.
+
+Folders, per task under the table's ``OUT``::
+
+    OUT/<task>/data                       the demonstrations (one dataset per task)
+    OUT/<task>/train/<run>                a checkpoint, <run> named by spec, steps, batch, --set
+    OUT/<task>/eval/<run>-e<episodes>     its evaluation (the harness's folder)
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from rmbench.envs.noise import NoiseSpec
+from rmbench.tasks import get_task
+from rmbench.tasks.registry import ordered
+
+POLICY_NAMES = ("mem0", "dp", "act")
+# every column of the two tables: policies, then Mem-0's ablations
+ALL_POLICIES = ("mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "dp", "act",
+                "mem0:no_key", "mem0:gt_classifier")
+M_N_ONLY = ("no_key", "gt_classifier")
+OBSERVATIONS = ("state", "pixels")
+# what collection records for each observation: the state's smallest video (datasets hold at
+# least one camera; nothing decodes it), or the three cameras as evaluation renders them
+COLLECT_CAMERAS = {"state": (("head",), (16, 16)),
+                   "pixels": (("head", "left_wrist", "right_wrist"), (320, 240))}
+
+
+def parse_policy(spec: str) -> tuple[str, tuple[str, ...], tuple[str, ...]]:
+    """``mem0:no_anchor+gt_classifier`` -> ("mem0", ("no_anchor",), ("gt_classifier",)): the
+    policy, its trained ablations and its inference ablations. An unknown one is a ValueError."""
+    from rmbench.policies.mem0.config import INFERENCE_ABLATIONS, TRAINED_ABLATIONS
+
+    name, _, rest = spec.partition(":")
+    if name not in POLICY_NAMES:
+        raise ValueError(f"unknown policy {spec!r}; policies: {', '.join(ALL_POLICIES)}")
+    ablations = tuple(a for a in rest.split("+") if a)
+    if ablations and name != "mem0":
+        raise ValueError(f"{spec}: only Mem-0 has ablations")
+    unknown = [a for a in ablations if a not in TRAINED_ABLATIONS + INFERENCE_ABLATIONS]
+    if unknown:
+        raise ValueError(f"{spec}: unknown ablation {unknown[0]!r}; ablations: "
+                         f"{', '.join(TRAINED_ABLATIONS + INFERENCE_ABLATIONS)}")
+    return (name, tuple(a for a in ablations if a in TRAINED_ABLATIONS),
+            tuple(a for a in ablations if a in INFERENCE_ABLATIONS))
+
+
+def trained_spec(spec: str) -> str:
+    """The spec whose checkpoint ``spec`` evaluates: ``mem0:gt_classifier`` -> ``mem0``."""
+    name, trained, _ = parse_policy(spec)
+    return name + (":" + "+".join(trained) if trained else "")
+
+
+def applies(spec: str, tmc: str) -> bool:
+    """Whether the column has a cell on a task of this TMC."""
+    _, trained, inference = parse_policy(spec)
+    return tmc == "M(n)" or not set(M_N_ONLY) & set(trained + inference)
+
+
+def run_name(spec: str, steps: int, batch: int, sets: tuple[str, ...] | list[str] = ()) -> str:
+    tag = "".join(f"-{s.replace('=', '')}" for s in sets)
+    return f"{spec.replace(':', '-')}-s{steps}-b{batch}{tag}".replace("/", "_").replace('"', "")
+
+
+def policy_fields() -> dict[str, set[str]]:
+    from rmbench.policies.trainable import TRAINABLE, trainable
+
+    return {name: {f.name for f in fields(trainable(name)[0])} for name in TRAINABLE}
+
+
+def check_sets(sets: tuple[str, ...] | list[str]) -> None:
+    """Each ``--set`` is FIELD=VALUE with a field some policy's config has (ValueError if not)."""
+    known = set().union(*policy_fields().values())
+    for s in sets:
+        key, sep, _ = s.partition("=")
+        if not sep or key not in known:
+            raise ValueError(f"--set {s!r}: expected FIELD=VALUE with a field of a policy's "
+                             f"config; fields: {', '.join(sorted(known))}")
+
+
+def config_for(spec: str, obs: str, sets: tuple[str, ...] | list[str] = ()):
+    """The config ``spec`` trains with: ``observation``, its trained ablations and the ``--set``
+    fields its config has (the others are another policy's). A value it refuses is a
+    ValueError naming the policy."""
+    from rmbench.policies.config import parse_overrides
+    from rmbench.policies.trainable import trainable
+
+    name, trained, _ = parse_policy(spec)
+    cls, _ = trainable(name)
+    mine = [s for s in sets if s.partition("=")[0] in policy_fields()[name]]
+    extra = {"ablations": trained} if trained else {}
+    try:
+        return cls(**{"observation": obs, **parse_overrides(cls, mine), **extra})
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} with {' '.join(mine) or 'its defaults'}: {err}") from None
+
+
+def memory_of(spec: str, tmc: str, cfg) -> str:
+    """What carries information across steps in this policy (``cfg``, its config), in words."""
+    name, _, inference = parse_policy(spec)
+    if name == "dp":
+        return f"observation window only ({cfg.obs_steps} steps)"
+    if name == "act":
+        return "observation window only (1 step; temporal ensembling averages past chunks)"
+    parts = []
+    if tmc == "M(n)":
+        parts.append("planner phase (subtask text" + (" + key memory)" if cfg.use_key else ")")
+                     + (", simulator's subtask boundaries" if inference else ""))
+    if cfg.use_anchor:
+        parts.append("anchor (subtask's first step)")
+    if cfg.use_sliding:
+        parts.append(f"sliding window ({cfg.sliding_window} x {cfg.memory_every} steps)")
+    return " + ".join(parts) or "current step only"
+
+
+@dataclass(frozen=True)
+class Plan:
+    """One table: every (task, policy) cell trained with the same recipe and evaluated on the
+    same expert-verified seeds. Its fields name its folders, so tables with different recipes
+    can share an ``OUT``."""
+
+    obs: str
+    tasks: tuple[str, ...]
+    policies: tuple[str, ...] = ALL_POLICIES
+    demos: int = 50
+    steps: int = 3000
+    batch: int = 32
+    episodes: int = 100
+    noise: float = 0.0
+    """Action noise executed during collection (DART), radians; ``noise_kind`` white|smooth."""
+    noise_kind: str = "white"
+    sets: tuple[str, ...] = ()
+    """``FIELD=VALUE`` overrides of every policy config that has the field (``rmbench train
+    --set``)."""
+    video: str = "none"
+    """The evaluation's videos (``rmbench eval --video``)."""
+
+    def __post_init__(self):
+        if self.obs not in OBSERVATIONS:
+            raise ValueError(f"obs must be one of {', '.join(OBSERVATIONS)}, got {self.obs!r}")
+        if not self.tasks or not self.policies:
+            raise ValueError("a table needs at least one task and one policy")
+        object.__setattr__(self, "tasks", tuple(get_task(t).name for t in self.tasks))
+        object.__setattr__(self, "policies", tuple(self.policies))
+        object.__setattr__(self, "sets", tuple(self.sets))
+        for spec in self.policies:
+            parse_policy(spec)
+        if min(self.demos, self.steps, self.batch, self.episodes) < 1:
+            raise ValueError("demos, steps, batch and episodes must be >= 1")
+        NoiseSpec(self.noise_kind, self.noise)  # a bad kind or sigma: one line
+        check_sets(self.sets)
+        for spec in {trained_spec(s) for s in self.policies}:  # a config refusing a value
+            config_for(spec, self.obs, self.sets)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Plan:
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+    def cells(self) -> list[tuple[str, str]]:
+        """(task, spec) of every cell, tasks in the benchmark's order (M(1), then M(n))."""
+        order = [t.name for t in ordered() if t.name in self.tasks]
+        return [(t, s) for t in order for s in self.policies if applies(s, get_task(t).tmc)]
+
+    def data_dir(self, out: Path, task: str) -> Path:
+        return Path(out) / task / "data"
+
+    def train_dir(self, out: Path, task: str, spec: str) -> Path:
+        return Path(out) / task / "train" / run_name(trained_spec(spec), self.steps, self.batch,
+                                                     self.sets)
+
+    def eval_dir(self, out: Path, task: str, spec: str) -> Path:
+        run = run_name(spec, self.steps, self.batch, self.sets)
+        return Path(out) / task / "eval" / f"{run}-e{self.episodes}"
+
+    def eval_policy(self, out: Path, task: str, spec: str) -> str:
+        """The ``--policy`` argument of the cell's evaluation."""
+        name, _, inference = parse_policy(spec)
+        query = f"?ablation={','.join(inference)}" if inference else ""
+        return f"{name}:{self.train_dir(out, task, spec)}{query}"

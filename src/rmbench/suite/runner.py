@@ -1,0 +1,248 @@
+"""Running a table: the jobs still missing, in dependency order (a task's collection before
+its cells' training, a checkpoint before its evaluations), ``jobs`` at a time on local worker
+processes or on Ray, with a progress grid across the whole table.
+
+Each job is a fresh process (``python -m rmbench.suite.job``) with ``cores / jobs`` torch
+threads and its own log in ``OUT/logs``; on Ray each is a task with one CPU, and ``OUT``
+must be a file system every node sees (the stages read and write their folders there). A
+job that fails is reported with its log and its dependants are skipped; the others go on.
+Interrupted (Ctrl-C, a killed session), the running jobs stop and what they saved stays:
+a re-run of the same command plans only what is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+from rmbench.suite import stages
+from rmbench.suite.job import run_job, source_digest
+from rmbench.suite.plan import Plan, trained_spec
+
+BACKENDS = ("local", "ray")
+PRIORITY = {"collect": 0, "eval": 1, "train": 2}  # unblock others first, results early
+
+
+@dataclass(frozen=True)
+class Job:
+    kind: str
+    task: str
+    spec: str = ""
+
+    @property
+    def name(self) -> str:
+        return " ".join(x for x in (self.kind, self.task, self.spec) if x)
+
+    @property
+    def log_name(self) -> str:
+        return self.name.replace(" ", "_").replace(":", "-").replace("+", "-") + ".log"
+
+
+def plan_jobs(plan: Plan, out: Path) -> dict[Job, tuple[Job, ...]]:
+    """Every job still to run, with the jobs it waits for, in table order."""
+    needs: dict[Job, tuple[Job, ...]] = {}
+    for task in dict.fromkeys(t for t, _ in plan.cells()):
+        collect = Job("collect", task)
+        fresh = not stages.collected(plan, out, task)
+        for _, spec in (c for c in plan.cells() if c[0] == task):
+            if stages.evaluated(plan, out, task, spec) is not None:
+                continue
+            if stages.trained(plan, out, task, spec):
+                needs[Job("eval", task, spec)] = ()
+                continue
+            train = Job("train", task, trained_spec(spec))
+            if fresh:
+                needs.setdefault(collect, ())
+            needs.setdefault(train, (collect,) if fresh else ())
+            needs[Job("eval", task, spec)] = (train,)
+    return needs
+
+
+# ------------------------------------------------------------------------------ backends
+class LocalJobs:
+    """Each job a subprocess of this Python; ``stop`` terminates the running ones."""
+
+    def __init__(self, threads: int):
+        self.threads = threads
+        self.running: dict[Job, tuple[subprocess.Popen, TextIO]] = {}
+
+    def start(self, plan: Plan, out: Path, job: Job, log: Path) -> None:
+        cmd = [sys.executable, "-m", "rmbench.suite.job", "--plan", json.dumps(plan.to_dict()),
+               "--out", str(out), "--kind", job.kind, "--task", job.task, "--spec", job.spec,
+               "--threads", str(self.threads), "--digest", source_digest()]
+        env = {**os.environ, **{v: str(self.threads) for v in
+                                ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}}
+        f = open(log, "a")
+        self.running[job] = (subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env), f)
+
+    def finished(self) -> list[tuple[Job, str | None]]:
+        """Jobs that ended since the last call, each with None or its error in one line."""
+        done = []
+        for job, (proc, f) in list(self.running.items()):
+            if proc.poll() is None:
+                continue
+            f.close()
+            del self.running[job]
+            done.append((job, None if proc.returncode == 0 else f"exit {proc.returncode}"))
+        return done
+
+    def stop(self) -> None:
+        for proc, f in self.running.values():
+            proc.terminate()
+            proc.wait()
+            f.close()
+        self.running.clear()
+
+
+class RayJobs:
+    """Each job a Ray task with one CPU (``RAY_ADDRESS`` or a local Ray instance)."""
+
+    def __init__(self):
+        try:
+            import ray
+        except ImportError as err:
+            raise RuntimeError("--backend ray needs Ray: pip install 'rmbench[ray]'") from err
+        self.ray = ray
+        if not ray.is_initialized():
+            ray.init(ignore_reinit_error=True, log_to_driver=False)
+        self.remote = ray.remote(num_cpus=1, max_retries=0)(run_job)
+        self.running: dict[Job, object] = {}
+
+    def start(self, plan: Plan, out: Path, job: Job, log: Path) -> None:
+        self.running[job] = self.remote.remote(plan.to_dict(), str(out), job.kind, job.task,
+                                               job.spec, 1, source_digest(), str(log))
+
+    def finished(self) -> list[tuple[Job, str | None]]:
+        if not self.running:
+            return []
+        refs = list(self.running.values())
+        ready, _ = self.ray.wait(refs, num_returns=len(refs), timeout=0)
+        done = []
+        for job, ref in list(self.running.items()):
+            if ref not in ready:
+                continue
+            del self.running[job]
+            try:
+                self.ray.get(ref)
+                done.append((job, None))
+            except Exception as err:  # a task's error, re-raised by Ray: reported, not fatal
+                done.append((job, f"{type(err).__name__}: {str(err).splitlines()[-1]}"))
+        return done
+
+    def stop(self) -> None:
+        for ref in self.running.values():
+            self.ray.cancel(ref, force=True)
+        self.running.clear()
+
+
+# ------------------------------------------------------------------------------- display
+def column(spec: str) -> str:
+    """A spec's short column name: Mem-0, DP, ACT, or Mem-0's ablation."""
+    return {"mem0": "Mem-0", "dp": "DP", "act": "ACT"}.get(spec, spec.removeprefix("mem0:"))
+
+
+class Progress:
+    """The table as a grid of cell states (waiting, collecting, training n%, evaluating n%,
+    the success rate, failed), redrawn in place on a terminal, printed on each change
+    otherwise."""
+
+    def __init__(self, plan: Plan, out: Path, stream: TextIO | None = None):
+        self.plan, self.out = plan, out
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = self.stream.isatty()
+        self.start = time.monotonic()
+        self.last = ""
+
+    def cell(self, task: str, spec: str, running: set[Job], failed: dict[Job, str]) -> str:
+        plan, out = self.plan, self.out
+        row = stages.evaluated(plan, out, task, spec)
+        if row is not None:
+            return f"{100 * row['success_rate']:.0f}%"
+        ev, tr = Job("eval", task, spec), Job("train", task, trained_spec(spec))
+        if ev in failed or tr in failed or Job("collect", task) in failed:
+            return "failed"
+        if ev in running:
+            return f"eval {stages.fraction(plan, out, 'eval', task, spec):.0%}"
+        if tr in running:
+            return f"train {stages.fraction(plan, out, 'train', task, spec):.0%}"
+        if Job("collect", task) in running:
+            return f"data {stages.fraction(plan, out, 'collect', task):.0%}"
+        return "."
+
+    def render(self, running: set[Job], failed: dict[Job, str]) -> str:
+        cells = self.plan.cells()
+        specs = list(self.plan.policies)
+        grid = {(t, s): self.cell(t, s, running, failed) for t, s in cells}
+        finished = sum(v.endswith("%") and " " not in v for v in grid.values())
+        elapsed = int(time.monotonic() - self.start)
+        head = (f"rmbench table ({self.plan.obs}): {finished}/{len(cells)} cells evaluated, "
+                f"{len(running)} running, {len(failed)} failed, "
+                f"{elapsed // 3600}:{elapsed // 60 % 60:02d}:{elapsed % 60:02d}")
+        width = {s: max(len(column(s)), 9) for s in specs}
+        lines = [head, f"{'task':<19}" + " ".join(f"{column(s):>{width[s]}}" for s in specs)]
+        for task in dict.fromkeys(t for t, _ in cells):
+            lines.append(f"{task:<19}" + " ".join(f"{grid.get((task, s), ''):>{width[s]}}"
+                                                  for s in specs))
+        return "\n".join(lines)
+
+    def show(self, running: set[Job], failed: dict[Job, str], event: str = "") -> None:
+        text = self.render(running, failed)
+        if self.tty:
+            if text != self.last:
+                self.stream.write("\x1b[H\x1b[2J" + text + "\n")
+        elif event:
+            self.stream.write(f"{event}\n{text}\n")
+        self.stream.flush()
+        self.last = text
+
+
+# ------------------------------------------------------------------------------ the loop
+def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
+        progress: Progress | None = None, poll_s: float = 2.0) -> dict[Job, str]:
+    """Run every missing job of ``plan`` into ``out``; the failed ones, with their errors."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if jobs < 1:
+        raise ValueError("jobs must be >= 1")
+    out = Path(out)
+    logs = out / "logs"
+    logs.mkdir(parents=True, exist_ok=True)
+    needs = plan_jobs(plan, out)
+    pool = (LocalJobs(max(1, (os.cpu_count() or 1) // jobs)) if backend == "local"
+            else RayJobs())
+    progress = progress or Progress(plan, out)
+    pending = sorted(needs, key=lambda j: PRIORITY[j.kind])  # stable: table order within
+    done: set[Job] = set()
+    failed: dict[Job, str] = {}
+    t0 = time.perf_counter()
+    try:
+        progress.show(set(pool.running), failed, f"{len(needs)} jobs to run")
+        while pending or pool.running:
+            for job in list(pending):
+                if any(d in failed for d in needs[job]):  # its input failed: skipped
+                    pending.remove(job)
+                    failed[job] = f"skipped: {' and '.join(d.name for d in needs[job] if d in failed)} failed"
+                elif len(pool.running) < jobs and all(d in done for d in needs[job]):
+                    pending.remove(job)
+                    pool.start(plan, out, job, logs / job.log_name)
+                    progress.show(set(pool.running), failed, f"started {job.name}")
+            for job, error in pool.finished():
+                if error is None:
+                    done.add(job)
+                else:
+                    failed[job] = f"{error} (log {logs / job.log_name})"
+                progress.show(set(pool.running), failed,
+                              f"{'done' if error is None else 'FAILED'} {job.name}")
+            if pending or pool.running:
+                time.sleep(poll_s)
+                progress.show(set(pool.running), failed)
+    finally:
+        pool.stop()
+        stages.add_time(out, "table_wall_s", time.perf_counter() - t0)
+    return failed

@@ -1,0 +1,159 @@
+"""A table cell's three stages, each resumable and each a no-op once done: collect the task's
+demonstrations, train the cell's checkpoint, evaluate it. Wall times accumulate in each
+folder's ``timing.json`` over the calls that completed a stage's piece (a call killed midway
+loses its own time, not what it saved)."""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+from rmbench.data import CollectConfig, collect
+from rmbench.data.reader import Dataset
+from rmbench.envs.noise import NoiseSpec
+from rmbench.eval import EvalConfig, evaluate
+from rmbench.eval.harness import read_records
+from rmbench.suite.plan import COLLECT_CAMERAS, Plan, config_for, memory_of, parse_policy, trained_spec
+from rmbench.tasks import get_task
+from rmbench.training.loop import CURVE_CSV, TrainConfig
+from rmbench.video import write_atomic
+
+TIMING = "timing.json"
+
+
+def read_json(path: Path, default):
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError):
+        return default
+
+
+def add_time(folder: Path, key: str, seconds: float) -> None:
+    """Accumulate a stage's wall time in ``folder/timing.json``."""
+    path = Path(folder) / TIMING
+    timing = read_json(path, {})
+    timing[key] = round(timing.get(key, 0.0) + seconds, 1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, (json.dumps(timing, indent=1) + "\n").encode())
+
+
+# ------------------------------------------------------------------------------ done yet?
+def collected(plan: Plan, out: Path, task: str) -> bool:
+    root = plan.data_dir(out, task)
+    return (root / "meta" / "info.json").exists() and Dataset(root).num_episodes >= plan.demos
+
+
+def trained(plan: Plan, out: Path, task: str, spec: str) -> bool:
+    return read_json(plan.train_dir(out, task, spec) / "config.json", {}).get("step") == plan.steps
+
+
+def evaluated(plan: Plan, out: Path, task: str, spec: str) -> dict | None:
+    """The cell's evaluation result (the harness's per-task summary) once complete, else None."""
+    summary = read_json(plan.eval_dir(out, task, spec) / "summary.json", {})
+    result = summary.get("tasks", {}).get(task)
+    return result if result is not None and result["episodes"] >= plan.episodes else None
+
+
+def fraction(plan: Plan, out: Path, kind: str, task: str, spec: str = "") -> float:
+    """How far a stage has come (0-1), read from what it has written so far."""
+    if kind == "collect":
+        root = plan.data_dir(out, task)
+        info = read_json(root / "meta" / "info.json", {})
+        return min(1.0, info.get("total_episodes", 0) / plan.demos)
+    if kind == "train":
+        curve = plan.train_dir(out, task, spec) / CURVE_CSV
+        try:
+            with open(curve, "rb") as f:
+                f.seek(max(0, f.seek(0, 2) - 200))
+                last = f.read().decode(errors="replace").strip().splitlines()[-1]
+            return min(1.0, int(last.split(",")[0]) / plan.steps)
+        except (OSError, ValueError, IndexError):
+            return 0.0
+    records = plan.eval_dir(out, task, spec) / task / "episodes.jsonl"
+    try:
+        return min(1.0, sum(1 for _ in open(records)) / plan.episodes)
+    except OSError:
+        return 0.0
+
+
+# ------------------------------------------------------------------------------- stages
+def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
+                  progress: bool = False) -> dict[str, Any]:
+    """The task's demonstrations (continued where a previous call stopped); their summary."""
+    cameras, (width, height) = COLLECT_CAMERAS[plan.obs]
+    root = plan.data_dir(out, task)
+    if not collected(plan, out, task):
+        t0 = time.perf_counter()
+        collect(CollectConfig(task, root, episodes=plan.demos, seed=0, cameras=cameras,
+                              width=width, height=height, workers=workers,
+                              noise=NoiseSpec(plan.noise_kind, plan.noise), progress=progress))
+        add_time(root.parent, "collect_wall_s", time.perf_counter() - t0)
+    ds = Dataset(root)
+    return {"path": str(root), "episodes": ds.num_episodes, "frames": ds.num_frames,
+            "cameras": list(ds.cameras), "resolution": f"{width}x{height}",
+            "environment_state": ds.state_names is not None,
+            "noise": NoiseSpec(plan.noise_kind, plan.noise).to_dict() if plan.noise else None,
+            "collect_wall_s": read_json(root.parent / TIMING, {}).get("collect_wall_s")}
+
+
+def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = False) -> Path:
+    """The cell's checkpoint (its trained spec's: ``mem0:gt_classifier`` trains ``mem0``),
+    resumed from its last saved state; a finished one is left alone."""
+    from rmbench.policies.trainable import trainable
+
+    folder = plan.train_dir(out, task, spec)
+    if not trained(plan, out, task, spec):
+        spec = trained_spec(spec)
+        cfg = config_for(spec, plan.obs, plan.sets)
+        train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=0,
+                                save_every=min(500, plan.steps))
+        _, fit = trainable(parse_policy(spec)[0])
+        t0 = time.perf_counter()
+        fit(plan.data_dir(out, task), folder, cfg, train_cfg, progress=progress)
+        add_time(folder, "train_wall_s", time.perf_counter() - t0)
+    return folder
+
+
+def eval_stage(plan: Plan, out: Path, task: str, spec: str, workers: int = 1,
+               progress: bool = False) -> dict[str, Any]:
+    """The cell's evaluation on ``plan.episodes`` expert-verified seeds (only the missing ones
+    run); the harness's per-task result."""
+    result = evaluated(plan, out, task, spec)
+    if result is None:
+        folder = plan.eval_dir(out, task, spec)
+        t0 = time.perf_counter()
+        summary = evaluate(EvalConfig((task,), plan.eval_policy(out, task, spec), folder,
+                                      episodes=plan.episodes, workers=workers, video=plan.video,
+                                      progress=progress))
+        add_time(folder, "eval_wall_s", time.perf_counter() - t0)
+        result = summary["tasks"][task]
+    return result
+
+
+# -------------------------------------------------------------------------------- results
+def failure_reasons(records: Path) -> dict[str, int]:
+    """How the failed episodes ended, by the message the task or the harness gave, most
+    frequent first ("timeout" for an episode that ran out of steps)."""
+    counts = Counter(r["message"] or r["reason"] for r in read_records(records)
+                     if not r["success"])
+    return dict(counts.most_common())
+
+
+def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | None:
+    """A finished cell's row (success rate, progress, endings, failure reasons, wall times,
+    its memory in words, its folders), or None while it is not evaluated."""
+    result = evaluated(plan, out, task, spec)
+    if result is None:
+        return None
+    ckpt, evals = plan.train_dir(out, task, spec), plan.eval_dir(out, task, spec)
+    cfg = config_for(trained_spec(spec), plan.obs, plan.sets)
+    return {"success_rate": result["success_rate"], "mean_progress": result["mean_progress"],
+            "episodes": result["episodes"], "endings": result["endings"],
+            "failure_reasons": failure_reasons(evals / task / "episodes.jsonl"),
+            "train_wall_s": read_json(ckpt / TIMING, {}).get("train_wall_s"),
+            "eval_wall_s": read_json(evals / TIMING, {}).get("eval_wall_s"),
+            "memory": memory_of(spec, get_task(task).tmc, cfg), "checkpoint": str(ckpt),
+            "evaluation": str(evals)}

@@ -1,0 +1,177 @@
+"""``rmbench table`` (rmbench.suite) and benchmarks/learning.py over it: the plan's columns and
+folders, the jobs a table still needs, a toy table end to end (resumed, a corrupt checkpoint
+failing its cell alone) and the tables it writes."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from rmbench.cli.main import main as cli
+from rmbench.suite import runner, stages, tables
+from rmbench.suite.plan import (
+    Plan,
+    applies,
+    check_sets,
+    config_for,
+    memory_of,
+    parse_policy,
+    run_name,
+    trained_spec,
+)
+
+LEARNING = Path(__file__).resolve().parents[1] / "benchmarks" / "learning.py"
+
+
+def test_policy_specs_and_their_columns():
+    assert parse_policy("mem0:no_anchor+gt_classifier") == ("mem0", ("no_anchor",), ("gt_classifier",))
+    assert parse_policy("dp") == ("dp", (), ())
+    assert trained_spec("mem0:gt_classifier") == "mem0"
+    for bad, match in (("pi0", "unknown policy"), ("act:no_memory", "only Mem-0"),
+                       ("mem0:no_brain", "unknown ablation")):
+        with pytest.raises(ValueError, match=match):
+            parse_policy(bad)
+    # no_key and gt_classifier concern the planner and classifier an M(1) task lacks
+    assert not applies("mem0:no_key", "M(1)") and applies("mem0:no_key", "M(n)")
+    assert applies("mem0:no_anchor", "M(1)")
+    plan = Plan("state", ("press_button", "put_back_block"), ("mem0", "mem0:no_key", "dp"))
+    assert plan.cells() == [("put_back_block", "mem0"), ("put_back_block", "dp"),
+                            ("press_button", "mem0"), ("press_button", "mem0:no_key"),
+                            ("press_button", "dp")]
+    gt = Plan("state", ("press_button",), ("mem0", "mem0:gt_classifier"))
+    out, task = Path("/t"), "press_button"
+    assert gt.train_dir(out, task, "mem0:gt_classifier") == gt.train_dir(out, task, "mem0")
+    assert gt.eval_dir(out, task, "mem0:gt_classifier") != gt.eval_dir(out, task, "mem0")
+    assert gt.eval_policy(out, task, "mem0:gt_classifier").endswith("?ablation=gt_classifier")
+    assert Plan.from_dict(json.loads(json.dumps(gt.to_dict()))) == gt
+    with pytest.raises(ValueError, match="obs must be"):
+        Plan("depth", ("press_button",))
+    with pytest.raises(Exception, match="unknown task"):
+        Plan("state", ("no_such_task",))
+
+
+def test_set_reaches_only_the_configs_with_the_field():
+    sets = ["head_layers=2", "execute=10", "obs_steps=3"]
+    mem0 = config_for("mem0:no_anchor", "state", sets)
+    assert (mem0.head_layers, mem0.execute, mem0.observation) == (2, 10, "state")
+    assert mem0.ablations == ("no_anchor",)
+    dp = config_for("dp", "state", sets)
+    assert (dp.execute, dp.obs_steps) == (10, 3)  # DP has no head_layers: left alone
+    check_sets(sets)
+    # a value one policy's config refuses is a one-line error naming the policy
+    with pytest.raises(ValueError, match="dp with execute=20: execute"):
+        config_for("dp", "state", ["execute=20"])
+    with pytest.raises(ValueError, match="dp with execute=20"):
+        Plan("state", ("put_back_block",), ("mem0", "dp"), sets=("execute=20",))
+    with pytest.raises(ValueError, match="no_such_field"):
+        check_sets(["no_such_field=1"])
+    with pytest.raises(ValueError, match="FIELD=VALUE"):
+        check_sets(["head_layers"])
+
+
+def test_run_names_and_memory_in_words():
+    plain = run_name("mem0:no_memory", 12000, 128)
+    assert plain == "mem0-no_memory-s12000-b128"
+    tagged = run_name("mem0:no_memory", 12000, 128, ["head_layers=2", 'observation="x"'])
+    assert tagged.startswith(plain) and tagged != plain
+    assert "/" not in run_name("mem0", 1, 1, ["cameras=[\"a/b\"]"])
+    no_sliding = config_for("mem0:no_sliding", "state")
+    assert "sliding" not in memory_of("mem0:no_sliding", "M(1)", no_sliding)
+    window = config_for("mem0", "state", ["sliding_window=4"])
+    assert "4 x 5 steps" in memory_of("mem0", "M(1)", window)
+    assert "simulator" in memory_of("mem0:gt_classifier", "M(n)", config_for("mem0", "state"))
+
+
+def test_jobs_wait_for_what_they_read(tmp_path):
+    plan = Plan("state", ("press_button",), ("mem0", "mem0:gt_classifier", "dp"))
+    needs = runner.plan_jobs(plan, tmp_path)
+    J = runner.Job
+    collect, train = J("collect", "press_button"), J("train", "press_button", "mem0")
+    assert needs[collect] == () and needs[train] == (collect,)
+    # the classifier ablation evaluates Mem-0's checkpoint: one training job for both
+    assert needs[J("eval", "press_button", "mem0:gt_classifier")] == (train,)
+    assert sorted(j.kind for j in needs) == ["collect", "eval", "eval", "eval", "train", "train"]
+
+
+@pytest.fixture(scope="module")
+def toy_table(tmp_path_factory):
+    """A toy table, two jobs at a time: 2 demonstrations, 6 training steps, 1 episode."""
+    out = tmp_path_factory.mktemp("table")
+    args = ["table", "--obs", "state", "--tasks", "observe_and_pickup", "--policies", "mem0,dp",
+            "--demos", "2", "--steps", "6", "--batch", "4", "--episodes", "1", "--out", str(out),
+            "--jobs", "2"]
+    assert cli(args) == 0
+    return out, args
+
+
+def test_toy_table_end_to_end_and_resumed(toy_table, capsys):
+    out, args = toy_table
+    res = json.loads((out / "table.json").read_text())
+    cells = res["cells"]["observe_and_pickup"]
+    assert set(cells) == {"mem0", "dp"}
+    for row in cells.values():
+        assert row["episodes"] == 1 and 0 <= row["success_rate"] <= 1 and row["train_wall_s"] > 0
+    text = (out / "table.md").read_text()
+    assert "| observe_and_pickup | M(1) |" in text and "(published)" in text
+    # a re-run finds every cell done: no job runs, nothing is rewritten but the tables
+    checkpoint = out / "observe_and_pickup" / "train" / "mem0-s6-b4" / "model.safetensors"
+    mtime = checkpoint.stat().st_mtime_ns
+    plan = Plan.from_dict(res["plan"])
+    assert runner.plan_jobs(plan, out) == {}
+    assert cli(args) == 0
+    assert checkpoint.stat().st_mtime_ns == mtime
+    assert "0 jobs to run" in capsys.readouterr().err
+
+
+def test_a_corrupt_checkpoint_fails_its_cell_alone(toy_table, tmp_path, capsys):
+    import shutil
+
+    out, args = toy_table
+    copy = tmp_path / "table"
+    shutil.copytree(out, copy)
+    plan = Plan.from_dict(json.loads((out / "table.json").read_text())["plan"])
+    shutil.rmtree(plan.eval_dir(copy, "observe_and_pickup", "mem0"))
+    shutil.rmtree(plan.eval_dir(copy, "observe_and_pickup", "dp"))
+    (plan.train_dir(copy, "observe_and_pickup", "mem0") / "model.safetensors").write_bytes(b"junk")
+    args = [a if a != str(out) else str(copy) for a in args]
+    assert cli(args) == 1
+    err = capsys.readouterr().err
+    assert "FAILED eval observe_and_pickup mem0" in err and "1 job(s) failed" in err
+    log = (copy / "logs" / "eval_observe_and_pickup_mem0.log").read_text()
+    assert "model.safetensors" in log.strip().splitlines()[-1]  # the one-line error, in its log
+    res = json.loads((copy / "table.json").read_text())
+    assert res["cells"]["observe_and_pickup"]["mem0"] is None  # "—" in the tables
+    assert res["cells"]["observe_and_pickup"]["dp"]["episodes"] == 1  # the other cell went on
+    assert "eval observe_and_pickup mem0" in res["failed"]
+
+
+def test_learning_benchmark_is_the_table_for_one_task(toy_table, tmp_path):
+    """benchmarks/learning.py with the toy table's settings finds its cells done and writes its
+    results file from them."""
+    out, _ = toy_table
+    spec = importlib.util.spec_from_file_location("learning_benchmark", LEARNING)
+    learning = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(learning)
+    results = tmp_path / "r.json"
+    assert learning.main(["--task", "observe_and_pickup", "--obs", "state", "--policies", "mem0,dp",
+                          "--demos", "2", "--steps", "6", "--batch", "4", "--episodes", "1",
+                          "--out", str(out), "--results", str(results)]) == 0
+    res = json.loads(results.read_text())
+    table = json.loads((out / "table.json").read_text())["cells"]["observe_and_pickup"]
+    for spec_ in ("mem0", "dp"):
+        assert res["policies"][spec_]["success_rate"] == table[spec_]["success_rate"]
+    assert res["dataset"]["episodes"] == 2 and res["noise"] is None
+    with pytest.raises(SystemExit, match="unknown policy"):
+        learning.main(["--task", "observe_and_pickup", "--obs", "state", "--policies", "pi0"])
+
+
+def test_tables_mark_missing_and_absent_cells(tmp_path):
+    plan = Plan("state", ("put_back_block", "press_button"), ("mem0", "mem0:no_key"))
+    res = tables.results(plan, tmp_path)
+    assert res["cells"] == {"put_back_block": {"mem0": None},
+                            "press_button": {"mem0": None, "mem0:no_key": None}}
+    text = tables.markdown(res)
+    assert "| put_back_block | M(1) | — | n/a |" in text
+    assert "| swap_T |" not in text  # only the plan's tasks
+    assert stages.fraction(plan, tmp_path, "train", "put_back_block", "mem0") == 0.0
