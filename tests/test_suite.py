@@ -175,3 +175,17 @@ def test_tables_mark_missing_and_absent_cells(tmp_path):
     assert "| put_back_block | M(1) | — | n/a |" in text
     assert "| swap_T |" not in text  # only the plan's tasks
     assert stages.fraction(plan, tmp_path, "train", "put_back_block", "mem0") == 0.0
+
+
+@pytest.mark.slow
+def test_toy_table_on_ray(tmp_path):
+    """The same toy table on a local Ray instance (the rmbench[ray] extra; 5 min beside two
+    training runs on 2 cores, most of it Ray's start-up)."""
+    pytest.importorskip("ray")
+    out = tmp_path / "table"
+    assert cli(["table", "--obs", "state", "--tasks", "observe_and_pickup", "--policies", "dp",
+                "--demos", "2", "--steps", "6", "--batch", "4", "--episodes", "1", "--out",
+                str(out), "--jobs", "2", "--backend", "ray"]) == 0
+    row = json.loads((out / "table.json").read_text())["cells"]["observe_and_pickup"]["dp"]
+    assert row["episodes"] == 1
+    assert (out / "logs" / "train_observe_and_pickup_dp.log").exists()
