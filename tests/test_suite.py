@@ -64,6 +64,13 @@ def test_set_reaches_only_the_configs_with_the_field():
         config_for("dp", "state", ["execute=20"])
     with pytest.raises(ValueError, match="dp with execute=20"):
         Plan("state", ("put_back_block",), ("mem0", "dp"), sets=("execute=20",))
+    # POLICY.FIELD=VALUE reaches that policy alone
+    plan = Plan("state", ("put_back_block",), ("mem0", "dp"), sets=("mem0.execute=20", "execute=4"))
+    assert config_for("mem0", "state", plan.sets).execute == 4  # the later item wins
+    assert config_for("mem0", "state", ["execute=4", "mem0.execute=20"]).execute == 20
+    assert config_for("dp", "state", plan.sets).execute == 4
+    with pytest.raises(ValueError, match="POLICY.FIELD"):
+        check_sets(["dp.head_layers=2"])
     with pytest.raises(ValueError, match="no_such_field"):
         check_sets(["no_such_field=1"])
     with pytest.raises(ValueError, match="FIELD=VALUE"):

@@ -378,8 +378,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", type=float, default=0.0,
                    help="action noise executed during collection (DART), radians")
     p.add_argument("--noise-kind", choices=("white", "smooth"), default="white")
-    p.add_argument("--set", action="append", metavar="FIELD=VALUE",
-                   help="override every policy config that has the field (VALUE as JSON)")
+    p.add_argument("--set", action="append", metavar="[POLICY.]FIELD=VALUE",
+                   help="override every policy config that has the field, or POLICY's alone "
+                        "(mem0.execute=20); VALUE as JSON; repeatable")
     p.add_argument("--video", default="none", help="evaluation videos: first:K, failures, none")
     p.add_argument("--out", default=None, help="the table's folder (default runs/table_<obs>)")
     p.add_argument("--jobs", type=int, default=1,

@@ -79,26 +79,42 @@ def policy_fields() -> dict[str, set[str]]:
     return {name: {f.name for f in fields(trainable(name)[0])} for name in TRAINABLE}
 
 
+def _target(item: str) -> tuple[str | None, str]:
+    """``mem0.execute=20`` -> ("mem0", "execute"); ``execute=20`` -> (None, "execute")."""
+    key = item.partition("=")[0]
+    policy, dot, field = key.partition(".")
+    return (policy, field) if dot else (None, key)
+
+
 def check_sets(sets: tuple[str, ...] | list[str]) -> None:
-    """Each ``--set`` is FIELD=VALUE with a field some policy's config has (ValueError if not)."""
-    known = set().union(*policy_fields().values())
+    """Each ``--set`` is FIELD=VALUE with a field some policy's config has, or
+    POLICY.FIELD=VALUE with a field of that policy's (ValueError if not)."""
+    per_policy = policy_fields()
+    known = set().union(*per_policy.values())
     for s in sets:
-        key, sep, _ = s.partition("=")
-        if not sep or key not in known:
+        policy, field = _target(s)
+        ok = "=" in s and (field in per_policy.get(policy, ()) if policy else field in known)
+        if not ok:
             raise ValueError(f"--set {s!r}: expected FIELD=VALUE with a field of a policy's "
-                             f"config; fields: {', '.join(sorted(known))}")
+                             f"config, or POLICY.FIELD=VALUE (POLICY one of "
+                             f"{', '.join(per_policy)}); fields: {', '.join(sorted(known))}")
 
 
 def config_for(spec: str, obs: str, sets: tuple[str, ...] | list[str] = ()):
     """The config ``spec`` trains with: ``observation``, its trained ablations and the ``--set``
-    fields its config has (the others are another policy's). A value it refuses is a
-    ValueError naming the policy."""
+    items meant for it: FIELD=VALUE where its config has the field (the others are another
+    policy's), and POLICY.FIELD=VALUE naming it. A value it refuses is a ValueError naming
+    the policy."""
     from rmbench.policies.config import parse_overrides
     from rmbench.policies.trainable import trainable
 
     name, trained, _ = parse_policy(spec)
     cls, _ = trainable(name)
-    mine = [s for s in sets if s.partition("=")[0] in policy_fields()[name]]
+    mine = []
+    for item in sets:
+        policy, field = _target(item)
+        if policy == name or (policy is None and field in policy_fields()[name]):
+            mine.append(f"{field}={item.partition('=')[2]}")
     extra = {"ablations": trained} if trained else {}
     try:
         return cls(**{"observation": obs, **parse_overrides(cls, mine), **extra})
@@ -142,7 +158,7 @@ class Plan:
     noise_kind: str = "white"
     sets: tuple[str, ...] = ()
     """``FIELD=VALUE`` overrides of every policy config that has the field (``rmbench train
-    --set``)."""
+    --set``), ``POLICY.FIELD=VALUE`` of one policy's (``mem0.execute=20``)."""
     video: str = "none"
     """The evaluation's videos (``rmbench eval --video``)."""
 
