@@ -196,3 +196,46 @@ def test_toy_table_on_ray(tmp_path):
     row = json.loads((out / "table.json").read_text())["cells"]["observe_and_pickup"]["dp"]
     assert row["episodes"] == 1
     assert (out / "logs" / "train_observe_and_pickup_dp.log").exists()
+
+
+def test_a_terminated_table_stops_its_jobs(toy_table, tmp_path):
+    """SIGTERM to the runner mid-training: it exits, and so does the training job (a re-run
+    then resumes from what the job saved, the training loop's own tests cover that)."""
+    import os
+    import shutil
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "table"
+    shutil.copytree(toy_table[0] / "observe_and_pickup" / "data", out / "observe_and_pickup" / "data")
+    proc = subprocess.Popen([sys.executable, "-m", "rmbench.cli.main", "table", "--obs", "state",
+                             "--tasks", "observe_and_pickup", "--policies", "dp", "--demos", "2",
+                             "--steps", "100000", "--batch", "4", "--episodes", "1", "--out",
+                             str(out)], stderr=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    plan = Plan("state", ("observe_and_pickup",), ("dp",), demos=2, steps=100000, batch=4,
+                episodes=1)
+
+    def jobs():
+        found = []
+        for pid in filter(str.isdigit, os.listdir("/proc")):
+            try:
+                cmd = open(f"/proc/{pid}/cmdline", "rb").read().split(b"\0")
+            except OSError:
+                continue
+            if b"rmbench.suite.job" in cmd and str(out).encode() in cmd:
+                found.append(pid)
+        return found
+
+    deadline = time.monotonic() + 240
+    while stages.fraction(plan, out, "train", "observe_and_pickup", "dp") == 0:
+        assert time.monotonic() < deadline and proc.poll() is None, "training never started"
+        time.sleep(0.5)
+    assert jobs()
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=30) == 130
+    deadline = time.monotonic() + 15
+    while jobs():
+        assert time.monotonic() < deadline, "a job outlived its runner"
+        time.sleep(0.5)

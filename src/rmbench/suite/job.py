@@ -10,6 +10,7 @@ import contextlib
 import hashlib
 import json
 import sys
+import time
 from pathlib import Path
 
 from rmbench import source
@@ -51,6 +52,23 @@ def run_job(plan: dict, out: str, kind: str, task: str, spec: str, threads: int,
             stages.eval_stage(p, out_dir, task, spec)
 
 
+def exit_with_parent(poll_s: float = 2.0) -> None:
+    """End this process when the runner that started it dies (it is then re-parented), so a
+    killed runner leaves no job writing beside the one a re-run starts; every stage writes
+    atomically, so what the job saved stays."""
+    import os
+    import threading
+
+    parent = os.getppid()
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
 def main(argv: list[str] | None = None) -> int:
     a = argparse.ArgumentParser(description="one job of `rmbench table`")
     a.add_argument("--plan", required=True, help="the table's plan as JSON")
@@ -61,6 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     a.add_argument("--threads", type=int, default=1)
     a.add_argument("--digest", required=True)
     args = a.parse_args(argv)
+    exit_with_parent()
     try:
         run_job(json.loads(args.plan), args.out, args.kind, args.task, args.spec, args.threads,
                 args.digest)

@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -221,6 +223,9 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
     done: set[Job] = set()
     failed: dict[Job, str] = {}
     t0 = time.perf_counter()
+    main = threading.current_thread() is threading.main_thread()
+    # terminated: stop the jobs as Ctrl-C does (signal handlers belong to the main thread)
+    on_term = signal.signal(signal.SIGTERM, _interrupt) if main else None
     try:
         progress.show(set(pool.running), failed, f"{len(needs)} jobs to run")
         while pending or pool.running:
@@ -244,5 +249,11 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
                 progress.show(set(pool.running), failed)
     finally:
         pool.stop()
+        if main:
+            signal.signal(signal.SIGTERM, on_term)
         stages.add_time(out, "table_wall_s", time.perf_counter() - t0)
     return failed
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
