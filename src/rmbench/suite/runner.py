@@ -84,14 +84,19 @@ class LocalJobs:
         self.running[job] = (subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env), f)
 
     def finished(self) -> list[tuple[Job, str | None]]:
-        """Jobs that ended since the last call, each with None or its error in one line."""
+        """Jobs that ended since the last call, each with None or its error in one line (the
+        log's last line: the job's one-line error, or a traceback's last line)."""
         done = []
         for job, (proc, f) in list(self.running.items()):
             if proc.poll() is None:
                 continue
             f.close()
             del self.running[job]
-            done.append((job, None if proc.returncode == 0 else f"exit {proc.returncode}"))
+            if proc.returncode == 0:
+                done.append((job, None))
+                continue
+            lines = Path(f.name).read_text(errors="replace").strip().splitlines()
+            done.append((job, f"exit {proc.returncode}: {lines[-1] if lines else 'no output'}"))
         return done
 
     def stop(self) -> None:
