@@ -310,8 +310,17 @@ def test_state_noise_reaches_the_baselines_encoder(name, dataset):
     chosen = torch.tensor([n.startswith("object0_") and n.endswith(("_x", "_y", "_z"))
                            for n in names])
     assert chosen.any() and not chosen.all()
-    assert torch.equal(delta[:, ~chosen], torch.zeros_like(delta[:, ~chosen]))
-    assert float(delta[:, chosen].std()) == pytest.approx(0.01, rel=0.15)
+    assert torch.equal(delta[..., ~chosen], torch.zeros_like(delta[..., ~chosen]))
+    assert float(delta[..., chosen].std()) == pytest.approx(0.01, rel=0.15)
+    # joint_noise: the joint state the encoder reads moves, its target's reference does not
+    model = model_cls(replace(cfg, joint_noise=0.02), len(names))
+    states = []
+    model.observe = lambda inputs, state: (states.append(state), torch.zeros(len(state), 1))[1]
+    trainer = trainer_cls(model, 0, names)
+    trainer.observe(batch)
+    moved = states[0] - batch[L.STATE].reshape(states[0].shape)
+    assert float(moved[:, :6].std()) == pytest.approx(0.02, rel=0.15)
+    assert torch.equal(moved[:, 6], torch.zeros_like(moved[:, 6]))
 
 
 def test_state_checkpoint_round_trip_and_the_pixel_observation_error(state_ckpt):

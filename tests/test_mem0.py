@@ -464,3 +464,16 @@ def test_state_noise_moves_object_positions_only(dataset):
     chosen = torch.tensor([n.startswith("object0_") for n in names]) & position
     assert chosen.any() and (position & ~chosen).any()
     assert torch.equal(trainer.noise_scale != 0, chosen)
+    # joint_noise moves the twelve arm joints the encoder reads, not the grippers
+    model = build_model(replace(TINY_STATE, joint_noise=0.02), describe)
+    seen = []
+    encode = model.executor.encode
+    model.executor.encode = lambda inputs: (seen.append(inputs), encode(inputs))[1]
+    Mem0Trainer(model, 64, False, 0, names)(batch)
+    delta = seen[0][1] - batch[L.STATE]
+    assert torch.equal(delta[:, [6, 13]], torch.zeros_like(delta[:, [6, 13]]))
+    joints = delta[:, [k for k in range(14) if k not in (6, 13)]]
+    assert float(joints.std()) == pytest.approx(0.02, rel=0.1)
+    assert torch.equal(seen[0][0], batch[L.ENV_STATE])
+    with pytest.raises(ValueError, match="joint_noise"):
+        replace(TINY_STATE, joint_noise=-1.0)

@@ -29,6 +29,7 @@ import torch
 from rmbench.data import layout as L
 from rmbench.data.torch_dataset import resize
 from rmbench.policies.nn.backbone import CNN, backbone_features, check_backbone
+from rmbench.policies.nn.normalize import JOINTS
 from rmbench.tasks.state import is_position
 
 PIXELS, STATE, AUTO = "pixels", "state", "auto"
@@ -67,12 +68,19 @@ class ReadsObservation:
     state_noise_on: tuple[str, ...] = ()
     """Name prefixes of the position entries ``state_noise`` applies to (empty: all of them),
     e.g. ("mat_",) to blur the layout and keep the cube and the button exact."""
+    joint_noise: float = 0.0
+    """Training only: std (radians) of Gaussian noise on the twelve arm-joint positions the
+    policy reads at every training frame (the grippers' openings, and the state relative
+    actions are measured from, stay exact). Fifty demonstrations are also fifty joint
+    trajectories: the noise keeps the policy from recognising one by the arm's exact pose."""
 
     def __post_init__(self):
         super().__post_init__()
         check_backbone(self.backbone, self.backbone_stride)
         if not self.state_noise >= 0:
             raise ValueError(f"state_noise must be >= 0, got {self.state_noise}")
+        if not self.joint_noise >= 0:
+            raise ValueError(f"joint_noise must be >= 0, got {self.joint_noise}")
 
     @property
     def reads_state(self) -> bool:
@@ -121,9 +129,18 @@ def state_noise_scale(cfg: ReadsObservation, state_names) -> torch.Tensor | None
                          else 0.0 for n in state_names])
 
 
+def joint_noise_scale(cfg: ReadsObservation) -> torch.Tensor | None:
+    """Per-entry std of ``cfg.joint_noise`` over the joint state (zero on the grippers), or
+    None when no noise is asked for."""
+    if not cfg.joint_noise > 0:
+        return None
+    return torch.as_tensor(JOINTS, dtype=torch.float32) * cfg.joint_noise
+
+
 def add_state_noise(env_state: torch.Tensor, scale: torch.Tensor | None,
                     generator: torch.Generator) -> torch.Tensor:
-    """``env_state`` (..., D) plus N(0, ``scale``) per entry (unchanged when scale is None)."""
+    """``env_state`` (..., D) plus N(0, ``scale``) per entry (unchanged when scale is None);
+    the joint state's noise too (``joint_noise_scale``)."""
     if scale is None:
         return env_state
     noise = torch.randn(env_state.shape, generator=generator)

@@ -44,6 +44,7 @@ from rmbench.policies.observation import (
     camera_inputs,
     check_observation,
     choose,
+    joint_noise_scale,
     state_inputs,
     state_noise_scale,
     state_tensor,
@@ -136,11 +137,13 @@ class VisuomotorTrainer(nn.Module):
         self.model = model
         self.generator = torch.Generator().manual_seed(seed)
         self.noise_scale = state_noise_scale(model.cfg, state_names)
+        self.joint_scale = joint_noise_scale(model.cfg)
 
     def observe(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
         """The window's features (B, obs_steps, ...) through ``model.observe``."""
         cfg = self.model.cfg
-        state = batch[L.STATE]
+        # the joint state the policy reads (noisy with joint_noise); ``target`` uses the exact one
+        state = add_state_noise(batch[L.STATE], self.joint_scale, self.generator)
         if cfg.obs_steps == 1:
             state = state[:, None]
         b, n = state.shape[:2]

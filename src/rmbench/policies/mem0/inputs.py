@@ -27,17 +27,17 @@ def observation_encoder(cfg: Mem0Config, cameras: int, state_dim: int) -> nn.Mod
 
 
 def step_inputs(batch: dict[str, torch.Tensor], cfg: Mem0Config, cameras: tuple[str, ...],
-                generator: torch.Generator | None,
-                noise_scale: torch.Tensor | None = None) -> list[torch.Tensor]:
+                generator: torch.Generator | None, noise_scale: torch.Tensor | None = None,
+                state: torch.Tensor | None = None) -> list[torch.Tensor]:
     """A training batch's inputs to ``observation_encoder``: the frames of ``cameras``
     (jittered when ``generator`` is given), their cached backbone features, or the
     environment state (plus ``state_noise``, per entry ``noise_scale``, when a generator is
-    given) and the joint state."""
+    given) and the joint state (``state``, default the batch's)."""
     if cfg.reads_state:
         env_state = batch[L.ENV_STATE]
         if generator is not None:
             env_state = add_state_noise(env_state, noise_scale, generator)
-        return [env_state, batch[L.STATE]]
+        return [env_state, batch[L.STATE] if state is None else state]
     if cfg.reads_features:
         return [batch[features_key(cam)] for cam in cameras]
     images = [batch[L.image_key(cam)] for cam in cameras]

@@ -25,7 +25,7 @@ from rmbench.policies.mem0.planner import Planner
 from rmbench.policies.nn.ema import EMA
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
-from rmbench.policies.observation import state_noise_scale
+from rmbench.policies.observation import add_state_noise, joint_noise_scale, state_noise_scale
 
 ACTION_DIM = 14
 
@@ -97,6 +97,7 @@ class Mem0Trainer(nn.Module):
         self.decompose = decompose
         cfg = model.cfg
         self.noise_scale = state_noise_scale(cfg, state_names)
+        self.joint_scale = joint_noise_scale(cfg)
         self.memory = MemoryStore(batch_size, cfg.step_tokens, cfg.sliding_window, cfg.dim)
         self.last_subtask = torch.full((batch_size,), -1, dtype=torch.long)
         self.generator = torch.Generator().manual_seed(seed)
@@ -123,7 +124,9 @@ class Mem0Trainer(nn.Module):
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
         ex, cfg = self.model.executor, self.model.cfg
-        inputs = step_inputs(batch, cfg, cfg.cameras, self.generator, self.noise_scale)
+        # the joint state the policy reads (noisy with joint_noise); targets use the exact one
+        state = add_state_noise(batch[L.STATE], self.joint_scale, self.generator)
+        inputs = step_inputs(batch, cfg, cfg.cameras, self.generator, self.noise_scale, state)
         tokens, z = ex.encode(inputs)
         subtask = batch[L.SUBTASK_INDEX]
         reset = batch["episode_start"].bool()
@@ -134,7 +137,7 @@ class Mem0Trainer(nn.Module):
         c = ex.context(z, self.memory, batch["text_index"])
         self.memory.push(z)
         target = ex.normalizer.action(batch[L.ACTION], batch[L.STATE])
-        action_loss = ex.head.loss(ex.condition(c, batch[L.STATE]), target,
+        action_loss = ex.head.loss(ex.condition(c, state), target,
                                    batch["action_is_pad"], self.generator)
         logs = {"loss/action": action_loss.item()}
         loss = action_loss
