@@ -228,14 +228,21 @@ def test_a_terminated_table_stops_its_jobs(toy_table, tmp_path):
                 found.append(pid)
         return found
 
-    deadline = time.monotonic() + 120
-    while not jobs(b"train"):
-        assert time.monotonic() < deadline and proc.poll() is None, "training never started"
-        time.sleep(0.5)
-    time.sleep(3)  # into its steps
-    proc.send_signal(signal.SIGTERM)
-    assert proc.wait(timeout=30) == 130
-    deadline = time.monotonic() + 15
-    while jobs():
-        assert time.monotonic() < deadline, "a job outlived its runner"
-        time.sleep(0.5)
+    try:
+        deadline = time.monotonic() + 120
+        while not jobs(b"train"):
+            assert time.monotonic() < deadline and proc.poll() is None, "training never started"
+            time.sleep(0.5)
+        time.sleep(3)  # into its steps
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 130
+        deadline = time.monotonic() + 15
+        while jobs():
+            assert time.monotonic() < deadline, "a job outlived its runner"
+            time.sleep(0.5)
+    finally:  # a failed assertion leaves nothing running
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for pid in jobs():
+            os.kill(int(pid), signal.SIGKILL)
