@@ -53,7 +53,7 @@ from pathlib import Path
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.eval.episode import ENDINGS
 from rmbench.suite import runner, stages
-from rmbench.suite.plan import Plan
+from rmbench.suite.plan import Plan, add_recipe_arguments
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
 
@@ -86,15 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--policies", default=",".join(POLICIES),
                    help="comma-separated: mem0, mem0:ABLATION (no_memory, no_anchor, "
                         "no_sliding, no_key, gt_classifier), dp, act")
-    p.add_argument("--demos", type=int, default=50)
-    p.add_argument("--steps", type=int, default=3000)
-    p.add_argument("--batch", type=int, default=32)
-    p.add_argument("--episodes", type=int, default=100)
-    p.add_argument("--noise", type=float, default=0.0,
-                   help="action noise executed during collection (DART), radians")
-    p.add_argument("--noise-kind", choices=("white", "smooth"), default="white")
-    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                   help="override a policy config field (VALUE as JSON), repeatable")
+    add_recipe_arguments(p)
     p.add_argument("--out", type=Path, default=None,
                    help="data, checkpoints and evaluations, per task (default runs/learning/<obs>)")
     p.add_argument("--results", type=Path, default=None,

@@ -7,6 +7,7 @@ import json
 import logging
 import sys
 
+from rmbench.suite.plan import add_recipe_arguments
 from rmbench.tasks.registry import UnknownTaskError
 
 
@@ -219,7 +220,7 @@ def cmd_table(args) -> int:
     policies = [p.strip() for p in (args.policies or ",".join(ALL_POLICIES)).split(",") if p.strip()]
     plan = Plan(args.obs, tuple(tasks), tuple(policies), demos=args.demos, steps=args.steps,
                 batch=args.batch, episodes=args.episodes, noise=args.noise,
-                noise_kind=args.noise_kind, sets=tuple(args.set or ()), video=args.video)
+                noise_kind=args.noise_kind, sets=tuple(args.set), video=args.video)
     out = Path(args.out or f"runs/table_{args.obs}")
     failed = runner.run(plan, out, jobs=args.jobs, backend=args.backend)
     command = "rmbench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
@@ -371,16 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated: mem0, mem0:ABLATION (no_anchor, no_sliding, "
                         "no_memory, no_key, gt_classifier), dp, act (default: all of them; "
                         "no_key and gt_classifier on M(n) tasks only)")
-    p.add_argument("--demos", type=int, default=50)
-    p.add_argument("--steps", type=int, default=3000)
-    p.add_argument("--batch", type=int, default=32)
-    p.add_argument("--episodes", type=int, default=100)
-    p.add_argument("--noise", type=float, default=0.0,
-                   help="action noise executed during collection (DART), radians")
-    p.add_argument("--noise-kind", choices=("white", "smooth"), default="white")
-    p.add_argument("--set", action="append", metavar="[POLICY.]FIELD=VALUE",
-                   help="override every policy config that has the field, or POLICY's alone "
-                        "(mem0.execute=20); VALUE as JSON; repeatable")
+    add_recipe_arguments(p)
     p.add_argument("--video", default="none", help="evaluation videos: first:K, failures, none")
     p.add_argument("--out", default=None, help="the table's folder (default runs/table_<obs>)")
     p.add_argument("--jobs", type=int, default=1,

@@ -140,6 +140,21 @@ def memory_of(spec: str, tmc: str, cfg) -> str:
     return " + ".join(parts) or "current step only"
 
 
+def add_recipe_arguments(parser) -> None:
+    """The command-line options of a table's recipe (``Plan``'s fields beyond its tasks and
+    columns), shared by ``rmbench table`` and benchmarks/learning.py."""
+    parser.add_argument("--demos", type=int, default=50)
+    parser.add_argument("--steps", type=int, default=3000)
+    parser.add_argument("--batch", type=int, default=32)
+    parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--noise", type=float, default=0.0,
+                        help="action noise executed during collection (DART), radians")
+    parser.add_argument("--noise-kind", choices=("white", "smooth"), default="white")
+    parser.add_argument("--set", action="append", default=[], metavar="[POLICY.]FIELD=VALUE",
+                        help="override every policy config that has the field, or POLICY's "
+                             "alone (mem0.execute=20); VALUE as JSON; repeatable")
+
+
 @dataclass(frozen=True)
 class Plan:
     """One table: every (task, policy) cell trained with the same recipe and evaluated on the
