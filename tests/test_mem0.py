@@ -477,3 +477,36 @@ def test_state_noise_moves_object_positions_only(dataset):
     assert torch.equal(seen[0][0], batch[L.ENV_STATE])
     with pytest.raises(ValueError, match="joint_noise"):
         replace(TINY_STATE, joint_noise=-1.0)
+
+
+def test_ee_actions_train_and_run_as_joint_targets(dataset, tmp_path):
+    """action_space "ee": the head predicts 20-number grasp poses, the policy hands the env 14
+    joint targets, and a joint-relative setting is refused."""
+    with pytest.raises(ValueError, match="relative_actions"):
+        Mem0Config(action_space="ee")
+    cfg = replace(TINY_STATE, action_space="ee", relative_actions=False)
+    train_tiny(dataset, tmp_path / "ee", cfg=cfg)
+    policy = Mem0Policy(str(tmp_path / "ee"))
+    assert policy.model.executor.normalizer.action_min.shape == (20,)
+    env = make(Dataset(dataset).task, obs_type="environment_state_agent_pos")
+    obs, info = env.reset(seed=100000)
+    env.close()
+    policy.reset(info["instruction"], {"seed": 100000})
+    actions = np.stack([policy.act(obs) for _ in range(5)])  # two chunks of execute=4
+    assert actions.shape == (5, 14) and np.isfinite(actions).all()
+    low, high = policy.to_joints.kin.low["left"], policy.to_joints.kin.high["left"]
+    assert np.all(actions[:, :6] >= low) and np.all(actions[:, :6] <= high)
+
+
+def test_sample_noise_zero_samples_one_chunk_whatever_the_generator():
+    from rmbench.policies.mem0.action_head import FlowMatchingHead
+
+    torch.manual_seed(0)
+    head = FlowMatchingHead(16, 6, 14, layers=1, heads=2).eval()
+    cond = torch.randn(1, 3, 16)
+    draws = [head.sample(cond, 3, torch.Generator().manual_seed(s), noise=n)
+             for n in (0.0, 1.0) for s in (1, 2)]
+    torch.testing.assert_close(draws[0], draws[1])
+    assert not torch.allclose(draws[2], draws[3])
+    with pytest.raises(ValueError, match="sample_noise"):
+        Mem0Config(sample_noise=-1.0)

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import functools
-
 import mink
 import mujoco
 import numpy as np
 
 from rmbench.sim import robot
 from rmbench.sim.geometry import quat_to_mat
-from rmbench.sim.station import StationConfig, base_spec, home_action
+from rmbench.sim.kinematics import robot_model
+from rmbench.sim.station import home_action
 
 
 def top_down_quat(yaw: float) -> np.ndarray:
@@ -20,11 +19,6 @@ def top_down_quat(yaw: float) -> np.ndarray:
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, mat.reshape(9))
     return quat
-
-
-@functools.cache
-def _ik_model() -> mujoco.MjModel:
-    return base_spec(StationConfig(render=False)).compile()
 
 
 MAX_STEP = 0.2  # rad per IK iteration
@@ -38,7 +32,7 @@ class ArmIK:
     """
 
     def __init__(self):
-        self.model = _ik_model()
+        self.model = robot_model()
         self.config = mink.Configuration(self.model)
         self.limits = [mink.ConfigurationLimit(self.model)]
         self.tasks = {}

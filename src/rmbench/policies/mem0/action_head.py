@@ -57,10 +57,13 @@ class FlowMatchingHead(nn.Module):
 
     @torch.no_grad()
     def sample(self, cond: torch.Tensor, steps: int,
-               generator: torch.Generator | None = None) -> torch.Tensor:
+               generator: torch.Generator | None = None, noise: float = 1.0) -> torch.Tensor:
+        """A chunk (B, H, A) integrated from ``noise`` times standard normal noise."""
         b = cond.shape[0]
         x = torch.randn(b, self.horizon, self.action_dim, generator=generator,
                         device="cpu").to(cond.device)
+        if noise != 1.0:
+            x = x * noise
         for i in range(steps):
             t = torch.full((b,), i / steps, device=cond.device)
             x = x + self.velocity(x, t, cond) / steps

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from rmbench.policies.action_space import EEActions
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
 from rmbench.policies.config import parse_argument
@@ -76,6 +77,7 @@ class Mem0Policy(BasePolicy):
         if self.cfg.gt_classifier and self.env is None:
             raise ValueError("gt_classifier reads the simulator's subtask boundary: it cannot be "
                              "served remotely")
+        self.to_joints = EEActions() if cfg.action_space == "ee" else None
         self.decompose = self.describe["tmc"] == "M(n)"
         self.goal = self.describe["executor_texts"].index(goal_text(self.describe["task"]))
         self.done = self.describe["planner_texts"].index(DONE)
@@ -113,9 +115,12 @@ class Mem0Policy(BasePolicy):
             self.memory.push(z)
         if not self.queue:
             state = state_tensor(observation)
-            normalised = ex.head.sample(ex.condition(c, state), cfg.flow_steps, self.generator)
-            chunk = ex.normalizer.unaction(normalised, state)
-            self.queue = list(chunk[0, :cfg.execute].double().numpy())
+            normalised = ex.head.sample(ex.condition(c, state), cfg.flow_steps, self.generator,
+                                        cfg.sample_noise)
+            chunk = ex.normalizer.unaction(normalised, state)[0, :cfg.execute].double().numpy()
+            if self.to_joints is not None:
+                chunk = self.to_joints.to_joints(chunk, np.asarray(observation["agent_pos"], np.float64))
+            self.queue = list(chunk)
         action = self.queue.pop(0)
         if self.decompose and self.ended(c):
             self.subtask_ended(inputs)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from rmbench.policies.action_space import action_dim
 from rmbench.policies.config import PolicyConfig
 from rmbench.policies.observation import ReadsObservation, check_observation
 
@@ -18,7 +19,7 @@ ABLATIONS = TRAINED_ABLATIONS + INFERENCE_ABLATIONS
 @dataclass(frozen=True)
 class Mem0Config(ReadsObservation, PolicyConfig):
     # changeable at evaluation without retraining: mem0:CKPT?execute=5&flow_steps=20
-    INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps")
+    INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps", "sample_noise")
 
     # --- observation
     observation: str = "auto"
@@ -71,8 +72,16 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     state observation on put_back_block absolute targets doubled success (41 against 21 of
     100, docs/results/learning.md): a grasp pose is a function of the cube's pose alone, an
     offset to it changes at every step of the approach."""
+    action_space: str = "joints"
+    """What the action head predicts: "joints", the env's 14 joint targets, or "ee", each
+    grasp site's target pose (position and 6D rotation) and the gripper, turned into joint
+    targets by inverse kinematics at run time (policies/action_space.py); "ee" needs
+    relative_actions false."""
     flow_steps: int = 10
     """Euler integration steps when sampling a chunk."""
+    sample_noise: float = 1.0
+    """Scale of the noise a chunk's sampling starts from: 1 draws from the distribution the
+    head was trained on; below 1 leans towards the most likely chunk (0: deterministic)."""
     # --- end classifier
     end_window: int = 8
     """L: a subtask ends after L consecutive positive steps; the last L frames of each
@@ -138,9 +147,19 @@ class Mem0Config(ReadsObservation, PolicyConfig):
         if self.action_patch < 1 or self.horizon % self.action_patch:
             raise ValueError(f"action_patch ({self.action_patch}) must be >= 1 and divide the "
                              f"horizon ({self.horizon})")
+        action_dim(self.action_space)  # a one-line error for an unknown space
+        if self.sample_noise < 0:
+            raise ValueError(f"sample_noise must be >= 0, got {self.sample_noise}")
+        if self.action_space != "joints" and self.relative_actions:
+            raise ValueError(f"relative_actions are offsets from the joints: with action_space "
+                             f"{self.action_space!r} set relative_actions=false")
         for name in ("sliding_window", "memory_every", "end_window", "flow_steps", "head_layers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1")
+
+    @property
+    def action_dim(self) -> int:
+        return action_dim(self.action_space)
 
     @property
     def use_anchor(self) -> bool:

@@ -27,7 +27,7 @@ from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
 from rmbench.policies.observation import add_state_noise, joint_noise_scale, state_noise_scale
 
-ACTION_DIM = 14
+ACTION_DIM = 14  # the joint state (and the joint action space)
 
 
 class Executor(nn.Module):
@@ -42,10 +42,10 @@ class Executor(nn.Module):
         self.anchor_fusion = MemoryFusion(d, cfg.heads, cfg.step_tokens)
         self.sliding_fusion = MemoryFusion(d, cfg.heads, cfg.sliding_window)
         self.state_proj = nn.Linear(ACTION_DIM, d)
-        self.head = FlowMatchingHead(d, cfg.horizon, ACTION_DIM, cfg.head_layers, cfg.heads,
+        self.head = FlowMatchingHead(d, cfg.horizon, cfg.action_dim, cfg.head_layers, cfg.heads,
                                      cfg.action_patch)
         self.classifier = nn.Sequential(nn.Linear(3 * d, d), nn.GELU(), nn.Linear(d, 1))
-        self.normalizer = Normalizer(ACTION_DIM)
+        self.normalizer = Normalizer(ACTION_DIM, cfg.action_dim)
 
     def encode(self, inputs: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """Per-camera uint8 (B, 3, H, W), or [environment state (B, D), joint state (B, 14)],

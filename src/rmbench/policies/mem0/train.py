@@ -18,6 +18,7 @@ import torch
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
+from rmbench.policies.action_space import EE_DIM, EEActions
 from rmbench.policies.checkpoint import save_checkpoint
 from rmbench.policies.feature_cache import FeatureCache, with_features
 from rmbench.policies.mem0.classifier import end_labels
@@ -96,7 +97,11 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
                    "planner": vectors[len(executor_texts):]}
     torch.manual_seed(train_cfg.seed)
     model = build_model(cfg, describe, vectors)
-    norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
+    examples = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
+    if cfg.action_space == "ee":
+        norm = to_pose_actions(examples, dataset_stats(ds), cfg.horizon)
+    else:
+        norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
     model.executor.normalizer.load_state_dict(norm.state_dict())
     if cfg.reads_state:
         stats = dataset_stats(ds)
@@ -108,7 +113,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         planner_report = fit_planner(model, ds, cfg, train_cfg, planner_texts.index(DONE), progress)
     trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed,
                           describe.get("state_names", ()))
-    frames = with_features(Mem0Frames(ds, cfg, decompose, executor_texts.index(goal)), ds, cfg)
+    frames = with_features(examples, ds, cfg)
 
     def batches(start: int, rank: int, world: int):
         sampler = EpisodeOrderSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
@@ -120,6 +125,17 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         write_atomic(out / "training" / "planner.json",
                      (json.dumps(planner_report, indent=2) + "\n").encode())
     return result
+
+
+def to_pose_actions(frames: Mem0Frames, stats, horizon: int) -> Normalizer:
+    """Replace every episode's joint targets by grasp-pose targets (``action_space`` "ee"),
+    and the normaliser of their ranges."""
+    convert = EEActions()
+    for k, ep in enumerate(frames.low_dim):
+        frames.low_dim[k] = replace(ep, action=convert.from_joints(ep.action))
+    return Normalizer.from_episodes(stats, [ep.state for ep in frames.low_dim],
+                                    [ep.action for ep in frames.low_dim], horizon,
+                                    relative=np.zeros(EE_DIM, bool))
 
 
 def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: TrainConfig,

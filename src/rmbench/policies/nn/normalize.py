@@ -20,18 +20,19 @@ JOINTS = np.array([True] * 6 + [False] + [True] * 6 + [False])
 
 
 class Normalizer(nn.Module):
-    def __init__(self, dim: int = 14):
+    def __init__(self, dim: int = 14, action_dim: int | None = None):
         super().__init__()
+        action_dim = dim if action_dim is None else action_dim
         self.register_buffer("state_mean", torch.zeros(dim))
         self.register_buffer("state_std", torch.ones(dim))
-        self.register_buffer("action_min", -torch.ones(dim))
-        self.register_buffer("action_max", torch.ones(dim))
-        self.register_buffer("relative", torch.zeros(dim))  # 1 where actions are offsets
+        self.register_buffer("action_min", -torch.ones(action_dim))
+        self.register_buffer("action_max", torch.ones(action_dim))
+        self.register_buffer("relative", torch.zeros(action_dim))  # 1 where actions are offsets
 
     @classmethod
     def from_stats(cls, stats: dict[str, dict[str, np.ndarray]]) -> Normalizer:
         """Absolute actions, ranges from meta/stats.json."""
-        norm = cls(len(np.asarray(stats[L.ACTION]["min"])))
+        norm = cls(len(np.asarray(stats[L.STATE]["mean"])), len(np.asarray(stats[L.ACTION]["min"])))
         norm._set_state(stats)
         norm._set_range(np.asarray(stats[L.ACTION]["min"]), np.asarray(stats[L.ACTION]["max"]))
         return norm
@@ -42,15 +43,16 @@ class Normalizer(nn.Module):
                       relative: np.ndarray = JOINTS) -> Normalizer:
         """Relative actions: the range of ``action[t + k] - state[t]`` over every frame t and
         chunk offset k < horizon (the last action repeats past an episode's end, as in the
-        training chunks)."""
-        norm = cls(len(relative))
+        training chunks). ``actions`` may be in another space than the joints (``relative``
+        all False then, one entry per action dimension)."""
+        norm = cls(len(np.asarray(stats[L.STATE]["mean"])), len(relative))
         norm._set_state(stats)
         lo, hi = np.full(len(relative), np.inf), np.full(len(relative), -np.inf)
         for s, a in zip(states, actions, strict=True):
             n = len(a)
             for k in range(horizon):
                 target = a[np.minimum(np.arange(n) + k, n - 1)]
-                x = np.where(relative, target - s, target)
+                x = np.where(relative, target - s, target) if relative.any() else target
                 lo, hi = np.minimum(lo, x.min(0)), np.maximum(hi, x.max(0))
         norm._set_range(lo, hi)
         with torch.no_grad():
@@ -91,10 +93,11 @@ class Normalizer(nn.Module):
         return (x - self.state_mean) / self.state_std
 
     def action(self, x: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
-        """Actions (B, H, A) taken from ``state`` (B, A) -> normalised (B, H, A)."""
-        x = x - self.relative * state[:, None]
+        """Actions (B, H, A) taken from ``state`` (B, S) -> normalised (B, H, A)."""
+        if self.relative.any():  # (then A == S: offsets from the joints)
+            x = x - self.relative * state[:, None]
         return 2 * (x - self.action_min) / (self.action_max - self.action_min) - 1
 
     def unaction(self, x: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         y = (x.clamp(-1, 1) + 1) / 2 * (self.action_max - self.action_min) + self.action_min
-        return y + self.relative * state[:, None]
+        return y + self.relative * state[:, None] if self.relative.any() else y

@@ -1,0 +1,69 @@
+"""Forward and inverse kinematics of the two grasp sites, on a robot-only copy of the station.
+
+A pose is a grasp site's position and rotation matrix in the world frame. ``inverse`` is damped
+least squares on MuJoCo's site Jacobian, warm-started from given joints: an arm has six joints
+and a pose six degrees of freedom, so near the seed the solution is unique, and a pose read off
+joints by ``forward`` comes back to those joints. The experts' IK (experts/ik.py, mink with a
+posture task) plans far moves; this one follows nearby targets fast, one arm at a time.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import mujoco
+import numpy as np
+
+from rmbench.sim import robot
+from rmbench.sim.station import StationConfig, base_spec
+
+
+@functools.cache
+def robot_model() -> mujoco.MjModel:
+    """The empty station: the two arms on the table, no objects."""
+    return base_spec(StationConfig(render=False)).compile()
+
+
+class GraspKinematics:
+    def __init__(self):
+        self.model = robot_model()
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        joints = {side: [m.joint(f"{side}/{j}") for j in robot.ARM_JOINTS] for side in robot.SIDES}
+        self.qadr = {s: np.array([j.qposadr[0] for j in js]) for s, js in joints.items()}
+        self.dofadr = {s: np.array([j.dofadr[0] for j in js]) for s, js in joints.items()}
+        self.low = {s: np.array([m.jnt_range[j.id][0] for j in js]) for s, js in joints.items()}
+        self.high = {s: np.array([m.jnt_range[j.id][1] for j in js]) for s, js in joints.items()}
+        self.site = {s: m.site(f"{s}/grasp").id for s in robot.SIDES}
+        self._jacp = np.zeros((3, m.nv))
+        self._jacr = np.zeros((3, m.nv))
+
+    def forward(self, side: str, q6: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Grasp-site position (3,) and rotation matrix (3, 3) for ``side``'s joints ``q6``."""
+        self.data.qpos[self.qadr[side]] = q6
+        mujoco.mj_kinematics(self.model, self.data)
+        sid = self.site[side]
+        return self.data.site_xpos[sid].copy(), self.data.site_xmat[sid].reshape(3, 3).copy()
+
+    def inverse(self, side: str, pos: np.ndarray, mat: np.ndarray, seed: np.ndarray,
+                iters: int = 30, tol: float = 1e-5, damping: float = 1e-3) -> np.ndarray:
+        """Joints (6,) within their limits placing ``side``'s grasp site at (``pos``, ``mat``),
+        from ``seed``; an unreachable pose gives the nearest the iterations found."""
+        q = np.clip(np.asarray(seed, np.float64), self.low[side], self.high[side])
+        sid, dof = self.site[side], self.dofadr[side]
+        err, quat = np.empty(6), np.empty(4)
+        for _ in range(iters):
+            self.data.qpos[self.qadr[side]] = q
+            mujoco.mj_kinematics(self.model, self.data)
+            mujoco.mj_comPos(self.model, self.data)
+            err[:3] = pos - self.data.site_xpos[sid]
+            # the rotation taking the current orientation to the target, as a world-frame vector
+            mujoco.mju_mat2Quat(quat, (mat @ self.data.site_xmat[sid].reshape(3, 3).T).reshape(9))
+            mujoco.mju_quat2Vel(err[3:], quat, 1.0)
+            if np.abs(err).max() < tol:
+                break
+            mujoco.mj_jacSite(self.model, self.data, self._jacp, self._jacr, sid)
+            jac = np.vstack([self._jacp[:, dof], self._jacr[:, dof]])
+            step = jac.T @ np.linalg.solve(jac @ jac.T + damping**2 * np.eye(6), err)
+            q = np.clip(q + step, self.low[side], self.high[side])
+        return q

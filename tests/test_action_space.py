@@ -1,0 +1,57 @@
+"""Grasp-site kinematics and the "ee" action space: poses read off joints come back to those
+joints, on random postures and on an expert's recorded targets."""
+
+import numpy as np
+import pytest
+
+from rmbench.data.reader import Dataset
+from rmbench.policies.action_space import EE_DIM, EEActions, action_dim, rotation_from_6d
+from rmbench.sim import robot
+from rmbench.sim.kinematics import GraspKinematics
+
+
+def test_inverse_returns_the_joints_forward_was_given():
+    kin, rng = GraspKinematics(), np.random.default_rng(0)
+    for side in robot.SIDES:
+        for _ in range(50):
+            # reaching postures (elbow bent, gripper below the wrist), away from the limits
+            q = np.array([0.0, -0.3, 0.5, 0.0, 1.0, 0.0]) + rng.normal(0, 0.3, 6)
+            pos, mat = kin.forward(side, q)
+            solved = kin.inverse(side, pos, mat, q + rng.normal(0, 0.05, 6))
+            np.testing.assert_allclose(solved, q, atol=1e-4)
+            pos2, mat2 = kin.forward(side, solved)
+            np.testing.assert_allclose(pos2, pos, atol=2e-5)  # the solver's tolerance
+            np.testing.assert_allclose(mat2, mat, atol=5e-5)
+
+
+def test_inverse_stays_within_the_joint_limits():
+    kin = GraspKinematics()
+    far = np.array([5.0, 0.0, 3.0])  # out of reach: the nearest the iterations find
+    q = kin.inverse("left", far, np.eye(3), np.zeros(6))
+    assert np.all(q >= kin.low["left"]) and np.all(q <= kin.high["left"])
+
+
+def test_rotation_from_6d_is_a_rotation_and_keeps_a_rotation():
+    rng = np.random.default_rng(1)
+    r = rotation_from_6d(rng.normal(size=6))
+    np.testing.assert_allclose(r.T @ r, np.eye(3), atol=1e-12)
+    assert np.linalg.det(r) == pytest.approx(1.0)
+    np.testing.assert_allclose(rotation_from_6d(r[:, :2].T.reshape(6)), r, atol=1e-12)
+
+
+def test_pose_actions_round_trip_an_experts_targets(dataset):
+    ep = Dataset(dataset).episode(0, cameras=[])
+    convert = EEActions()
+    poses = convert.from_joints(ep.action)
+    assert poses.shape == (len(ep), EE_DIM) and poses.dtype == np.float32
+    np.testing.assert_array_equal(poses[:, 9], ep.action[:, 6])  # grippers pass through
+    np.testing.assert_array_equal(poses[:, 19], ep.action[:, 13])
+    # chunk by chunk as the policy runs them: warm-started from the measured joints
+    for t in range(0, len(ep), 20):
+        joints = convert.to_joints(poses[t:t + 20], ep.state[t])
+        np.testing.assert_allclose(joints, ep.action[t:t + 20], atol=5e-3)
+
+
+def test_unknown_action_space_is_a_one_line_error():
+    with pytest.raises(ValueError, match="unknown action space 'cartesian'"):
+        action_dim("cartesian")
