@@ -510,3 +510,24 @@ def test_sample_noise_zero_samples_one_chunk_whatever_the_generator():
     assert not torch.allclose(draws[2], draws[3])
     with pytest.raises(ValueError, match="sample_noise"):
         Mem0Config(sample_noise=-1.0)
+
+
+def test_grasp_pose_input_reads_the_joints_forward_kinematics(dataset, tmp_path):
+    from rmbench.policies.action_space import EEActions
+
+    cfg = replace(TINY_STATE, action_space="ee", relative_actions=False, grasp_pose_input=True)
+    train_tiny(dataset, tmp_path / "g", cfg=cfg)
+    policy = Mem0Policy(str(tmp_path / "g"))
+    encoder = policy.model.executor.encoders
+    ds = Dataset(dataset)
+    state = np.concatenate([ds.episode(e, cameras=[]).state for e in range(ds.num_episodes)])
+    poses = EEActions().from_joints(state)  # over the whole dataset
+    torch.testing.assert_close(encoder.pose_mean, torch.as_tensor(poses.mean(0)), atol=1e-5,
+                               rtol=1e-5)
+    env_state = torch.zeros(2, encoder.state_dim)
+    joints = torch.as_tensor(state[:2])
+    moved = joints.clone()
+    moved[:, 0] += 0.1  # a waist turn moves the left grasp pose, hence the tokens
+    assert not torch.allclose(encoder([env_state, joints]), encoder([env_state, moved]))
+    with pytest.raises(ValueError, match="grasp_pose_input"):
+        Mem0Config(observation="pixels", grasp_pose_input=True)

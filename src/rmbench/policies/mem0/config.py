@@ -36,6 +36,10 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     """With observation "state": tokens per step (the anchor's slots, as cameras are with pixels)."""
     state_hidden: int = 256
     """With observation "state": hidden width of the state encoder's two layers."""
+    grasp_pose_input: bool = False
+    """With observation "state": the encoder also reads the grasp sites' poses (forward
+    kinematics of the joint state, in the "ee" action space's layout), so a policy predicting
+    poses sees where its grippers are in the same terms."""
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
     """Cameras the executor reads, each through its own CNN."""
     image_size: tuple[int, int] = (96, 128)
@@ -148,6 +152,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
             raise ValueError(f"action_patch ({self.action_patch}) must be >= 1 and divide the "
                              f"horizon ({self.horizon})")
         action_dim(self.action_space)  # a one-line error for an unknown space
+        if self.grasp_pose_input and self.observation == "pixels":
+            raise ValueError("grasp_pose_input is read by the state encoder: it needs "
+                             "observation 'state'")
         if self.sample_noise < 0:
             raise ValueError(f"sample_noise must be >= 0, got {self.sample_noise}")
         if self.action_space != "joints" and self.relative_actions:

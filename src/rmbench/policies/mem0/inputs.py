@@ -21,7 +21,8 @@ def observation_encoder(cfg: Mem0Config, cameras: int, state_dim: int) -> nn.Mod
     """The CNNs or backbone heads (one per camera) or, with observation "state", the state
     MLP; either maps the step's inputs (``Mem0Policy.inputs``) to tokens (B, n, dim)."""
     if cfg.reads_state:
-        return StateEncoder(state_dim, cfg.dim, cfg.state_tokens, cfg.state_hidden)
+        return StateEncoder(state_dim, cfg.dim, cfg.state_tokens, cfg.state_hidden,
+                            grasp_pose=cfg.grasp_pose_input)
     return camera_encoders(cfg.backbone, cfg.backbone_stride, cameras, cfg.dim,
                            cfg.encoder_channels, cfg.keypoints)
 

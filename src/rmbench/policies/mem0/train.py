@@ -105,8 +105,12 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     model.executor.normalizer.load_state_dict(norm.state_dict())
     if cfg.reads_state:
         stats = dataset_stats(ds)
+        joints = (np.concatenate([ep.state for ep in examples.low_dim])
+                  if cfg.grasp_pose_input else None)
         for encoder in (model.executor.encoders, model.planner.encoders):
             encoder.set_stats(stats, L.ENV_STATE, L.STATE)
+            if joints is not None:
+                encoder.set_pose_stats(joints)
     out = Path(out)
     planner_report = None
     if decompose and not (out / STATE).exists():

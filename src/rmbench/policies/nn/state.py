@@ -1,7 +1,7 @@
 """The state observation's encoder, in place of the CNNs when a policy reads
 ``observation.environment_state`` (``observation="state"`` in its config).
 
-    [environment_state (normalised); agent_pos (normalised)] -> MLP -> tokens (B, n, dim)
+    [environment_state; agent_pos; (grasp poses)] (normalised) -> MLP -> tokens (B, n, dim)
 
 Both parts are normalised to zero mean and unit variance with the training dataset's
 statistics, stored here as buffers so that a checkpoint carries them. An entry that is constant
@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 from torch import nn
+
+from rmbench.policies.action_space import EE_DIM, EEActions
 
 STD_FLOOR = 1e-2
 CONSTANT = 1e-6  # a spread below this is an entry the dataset never varies
@@ -32,7 +34,7 @@ class StateEncoder(nn.Module):
     either. Two hidden GELU layers of width ``hidden``, a LayerNorm per token."""
 
     def __init__(self, state_dim: int, dim: int, tokens: int = 1, hidden: int = 256,
-                 agent_dim: int = 14):
+                 agent_dim: int = 14, grasp_pose: bool = False):
         super().__init__()
         if state_dim < 1:
             raise ValueError("a state encoder needs the environment state's length (>= 1)")
@@ -41,7 +43,12 @@ class StateEncoder(nn.Module):
         self.register_buffer("state_std", torch.ones(state_dim))
         self.register_buffer("agent_mean", torch.zeros(agent_dim))
         self.register_buffer("agent_std", torch.ones(agent_dim))
-        self.mlp = nn.Sequential(nn.Linear(state_dim + agent_dim, hidden), nn.GELU(),
+        # the grasp sites' poses, by forward kinematics of the joints (no gradient flows there)
+        self.poses = EEActions() if grasp_pose else None
+        pose_dim = EE_DIM if grasp_pose else 0
+        self.register_buffer("pose_mean", torch.zeros(pose_dim))
+        self.register_buffer("pose_std", torch.ones(pose_dim))
+        self.mlp = nn.Sequential(nn.Linear(state_dim + agent_dim + pose_dim, hidden), nn.GELU(),
                                  nn.Linear(hidden, hidden), nn.GELU(),
                                  nn.Linear(hidden, tokens * dim))
         self.norm = nn.LayerNorm(dim)
@@ -61,8 +68,20 @@ class StateEncoder(nn.Module):
                 getattr(self, f"{prefix}_std").copy_(
                     torch.as_tensor(safe_std(stats[key]["std"]), dtype=torch.float32))
 
+    def set_pose_stats(self, joint_states: np.ndarray) -> None:
+        """With ``grasp_pose``: the poses' mean and spread over a dataset's joint states."""
+        poses = self.poses.from_joints(joint_states)
+        with torch.no_grad():
+            self.pose_mean.copy_(torch.as_tensor(poses.mean(0), dtype=torch.float32))
+            self.pose_std.copy_(torch.as_tensor(safe_std(poses.std(0)), dtype=torch.float32))
+
     def forward(self, inputs: list[torch.Tensor]) -> torch.Tensor:
         env_state, agent_pos = inputs
-        x = torch.cat([(env_state.float() - self.state_mean) / self.state_std,
-                       (agent_pos.float() - self.agent_mean) / self.agent_std], -1)
+        parts = [(env_state.float() - self.state_mean) / self.state_std,
+                 (agent_pos.float() - self.agent_mean) / self.agent_std]
+        if self.poses is not None:
+            flat = agent_pos.detach().reshape(-1, agent_pos.shape[-1]).cpu().numpy()
+            pose = torch.from_numpy(self.poses.from_joints(flat)).to(agent_pos.device)
+            parts.append((pose.reshape(*agent_pos.shape[:-1], -1) - self.pose_mean) / self.pose_std)
+        x = torch.cat(parts, -1)
         return self.norm(self.mlp(x).unflatten(-1, (self.tokens, self.dim)))
