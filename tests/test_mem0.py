@@ -494,7 +494,7 @@ def test_ee_actions_train_and_run_as_joint_targets(dataset, tmp_path):
     policy.reset(info["instruction"], {"seed": 100000})
     actions = np.stack([policy.act(obs) for _ in range(5)])  # two chunks of execute=4
     assert actions.shape == (5, 14) and np.isfinite(actions).all()
-    low, high = policy.to_joints.kin.low["left"], policy.to_joints.kin.high["left"]
+    low, high = policy.ee.kin.low["left"], policy.ee.kin.high["left"]
     assert np.all(actions[:, :6] >= low) and np.all(actions[:, :6] <= high)
 
 

@@ -77,7 +77,7 @@ class Mem0Policy(BasePolicy):
         if self.cfg.gt_classifier and self.env is None:
             raise ValueError("gt_classifier reads the simulator's subtask boundary: it cannot be "
                              "served remotely")
-        self.to_joints = EEActions() if cfg.action_space == "ee" else None
+        self.ee = EEActions() if cfg.action_space == "ee" else None
         self.decompose = self.describe["tmc"] == "M(n)"
         self.goal = self.describe["executor_texts"].index(goal_text(self.describe["task"]))
         self.done = self.describe["planner_texts"].index(DONE)
@@ -118,8 +118,8 @@ class Mem0Policy(BasePolicy):
             normalised = ex.head.sample(ex.condition(c, state), cfg.flow_steps, self.generator,
                                         cfg.sample_noise)
             chunk = ex.normalizer.unaction(normalised, state)[0, :cfg.execute].double().numpy()
-            if self.to_joints is not None:
-                chunk = self.to_joints.to_joints(chunk, np.asarray(observation["agent_pos"], np.float64))
+            if self.ee is not None:  # grasp poses -> joint targets
+                chunk = self.ee.to_joints(chunk, np.asarray(observation["agent_pos"], np.float64))
             self.queue = list(chunk)
         action = self.queue.pop(0)
         if self.decompose and self.ended(c):
