@@ -531,3 +531,7 @@ def test_grasp_pose_input_reads_the_joints_forward_kinematics(dataset, tmp_path)
     assert not torch.allclose(encoder([env_state, joints]), encoder([env_state, moved]))
     with pytest.raises(ValueError, match="grasp_pose_input"):
         Mem0Config(observation="pixels", grasp_pose_input=True)
+    # without the option the weights are those of a checkpoint from before it existed
+    from rmbench.policies.nn.state import StateEncoder
+
+    assert not any("pose" in k for k in StateEncoder(4, 8).state_dict())

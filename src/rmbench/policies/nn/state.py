@@ -46,8 +46,9 @@ class StateEncoder(nn.Module):
         # the grasp sites' poses, by forward kinematics of the joints (no gradient flows there)
         self.poses = EEActions() if grasp_pose else None
         pose_dim = EE_DIM if grasp_pose else 0
-        self.register_buffer("pose_mean", torch.zeros(pose_dim))
-        self.register_buffer("pose_std", torch.ones(pose_dim))
+        if grasp_pose:  # (only then: checkpoints from before the option load as they are)
+            self.register_buffer("pose_mean", torch.zeros(pose_dim))
+            self.register_buffer("pose_std", torch.ones(pose_dim))
         self.mlp = nn.Sequential(nn.Linear(state_dim + agent_dim + pose_dim, hidden), nn.GELU(),
                                  nn.Linear(hidden, hidden), nn.GELU(),
                                  nn.Linear(hidden, tokens * dim))
