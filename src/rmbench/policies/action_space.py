@@ -15,9 +15,9 @@ import numpy as np
 
 from rmbench.sim import robot
 from rmbench.sim.kinematics import GraspKinematics
+from rmbench.sim.simulator import ACTION_DIM as JOINT_DIM
 
 ACTION_SPACES = ("joints", "ee")
-JOINT_DIM = 14
 EE_ARM = 10  # position (3), rotation's first two columns (6), gripper (1)
 EE_DIM = 2 * EE_ARM
 

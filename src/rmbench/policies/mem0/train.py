@@ -98,19 +98,19 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     torch.manual_seed(train_cfg.seed)
     model = build_model(cfg, describe, vectors)
     examples = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
+    stats = dataset_stats(ds)
     if cfg.action_space == "ee":
-        norm = to_pose_actions(examples, dataset_stats(ds), cfg.horizon)
+        norm = to_pose_actions(examples, stats, cfg.horizon)
     else:
         norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
     model.executor.normalizer.load_state_dict(norm.state_dict())
     if cfg.reads_state:
-        stats = dataset_stats(ds)
-        joints = (np.concatenate([ep.state for ep in examples.low_dim])
-                  if cfg.grasp_pose_input else None)
+        poses = (EEActions().from_joints(np.concatenate([ep.state for ep in examples.low_dim]))
+                 if cfg.grasp_pose_input else None)
         for encoder in (model.executor.encoders, model.planner.encoders):
             encoder.set_stats(stats, L.ENV_STATE, L.STATE)
-            if joints is not None:
-                encoder.set_pose_stats(joints)
+            if poses is not None:
+                encoder.set_pose_stats(poses)
     out = Path(out)
     planner_report = None
     if decompose and not (out / STATE).exists():

@@ -69,9 +69,9 @@ class StateEncoder(nn.Module):
                 getattr(self, f"{prefix}_std").copy_(
                     torch.as_tensor(safe_std(stats[key]["std"]), dtype=torch.float32))
 
-    def set_pose_stats(self, joint_states: np.ndarray) -> None:
-        """With ``grasp_pose``: the poses' mean and spread over a dataset's joint states."""
-        poses = self.poses.from_joints(joint_states)
+    def set_pose_stats(self, poses: np.ndarray) -> None:
+        """With ``grasp_pose``: mean and spread of the grasp poses (``EEActions.from_joints``)
+        of a dataset's joint states."""
         with torch.no_grad():
             self.pose_mean.copy_(torch.as_tensor(poses.mean(0), dtype=torch.float32))
             self.pose_std.copy_(torch.as_tensor(safe_std(poses.std(0)), dtype=torch.float32))
