@@ -103,7 +103,7 @@ def test_temporal_ensembling_weights_the_oldest_prediction_most():
     assert out[1] == pytest.approx((w[:2] @ [1, 2]) / w[:2].sum())
     # at step 5 the chunks of steps 2..5 cover it (step 1's has run out)
     assert out[5] == pytest.approx((w @ [3, 4, 5, 6]) / w.sum())
-    assert len(policy.chunks) == 4
+    assert len(policy.ensemble.chunks) == 4
 
 
 # ------------------------------------------------------------------ training

@@ -512,6 +512,38 @@ def test_sample_noise_zero_samples_one_chunk_whatever_the_generator():
         Mem0Config(sample_noise=-1.0)
 
 
+def test_temporal_ensemble_averages_the_chunks_that_cover_a_step(mn_state_ckpt):
+    """temporal_ensemble: a chunk every ensemble_every steps (not every execute), each step the
+    exp(-m i)-weighted mean of the chunks covering it; a new subtask starts afresh."""
+    env = make("press_button", obs_type="environment_state_agent_pos")
+    policy = Mem0Policy(f"{mn_state_ckpt}?temporal_ensemble=0.5&ensemble_every=3", env)
+    obs, info = env.reset(seed=100000)
+    env.close()
+    policy.reset(info["instruction"], {"seed": 100000})
+    horizon = policy.cfg.horizon
+    asked = []
+
+    def chunk(c, observation, length):
+        asked.append((policy.t, length))
+        return np.full((length, 14), float(len(asked)))
+
+    policy.chunk = chunk
+    policy.ended = lambda c: False
+    out = [policy.act(obs)[0] for _ in range(horizon + 1)]
+    assert asked == [(t, horizon) for t in range(0, horizon + 1, 3)]
+    w = np.exp(-0.5 * np.arange(3))
+    assert out[0] == out[1] == out[2] == 1.0
+    assert out[3] == pytest.approx((w[:2] @ [1, 2]) / w[:2].sum())
+    # at step 8 (the horizon) the chunk of step 0 has run out; those of steps 3 and 6 cover it
+    assert out[horizon] == pytest.approx((w[:2] @ [2, 3]) / w[:2].sum())
+    policy.start_subtask = True
+    assert policy.act(obs)[0] == float(len(asked)) and asked[-1][0] == horizon + 1
+    with pytest.raises(ValueError, match="ensemble_every"):
+        replace(TINY_STATE, ensemble_every=TINY_STATE.horizon + 1)
+    with pytest.raises(ValueError, match="temporal_ensemble"):
+        replace(TINY_STATE, temporal_ensemble=-1.0)
+
+
 def test_grasp_pose_input_reads_the_joints_forward_kinematics(dataset, tmp_path):
     from rmbench.policies.action_space import EEActions
 

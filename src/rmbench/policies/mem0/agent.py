@@ -3,7 +3,8 @@
 Every step: encode the frames (through the frozen backbone first, for a checkpoint trained
 with one), or for a checkpoint trained on the state the observation's ``environment_state``
 and ``agent_pos``; at a subtask's first step the anchor is set and the sliding window emptied;
-c_t from the memories; a new chunk of H actions when the last D are used; the end classifier's
+c_t from the memories; a new chunk of H actions when the last D are used (or, with temporal
+ensembling, every few steps, averaged over the chunks that overlap); the end classifier's
 debounced verdict (or, with gt_classifier, the simulator's subtask boundary).
 When a subtask ends its text and end frame go to key memory and the planner names the next
 one. M(1) tasks run as one subtask, the goal: no planner, no classifier.
@@ -22,6 +23,7 @@ from rmbench.policies.action_space import EEActions
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
 from rmbench.policies.config import parse_argument
+from rmbench.policies.ensemble import TemporalEnsemble
 from rmbench.policies.mem0.classifier import Debounce
 from rmbench.policies.mem0.config import TRAINED_ABLATIONS, Mem0Config
 from rmbench.policies.mem0.memory import MemoryStore
@@ -93,6 +95,8 @@ class Mem0Policy(BasePolicy):
         self.debounce = Debounce(cfg.end_window)
         self.t = 0
         self.queue: list[np.ndarray] = []
+        self.ensemble = TemporalEnsemble(cfg.horizon, cfg.temporal_ensemble)
+        self.next_chunk_at = 0  # with temporal ensembling: the step the next chunk is due
         self.first: torch.Tensor | None = None  # planner embedding of o_0
         self.keys: list[tuple[int, torch.Tensor]] = []
         self.subtask = self.goal
@@ -109,25 +113,37 @@ class Mem0Policy(BasePolicy):
             self.subtask = self.plan(self.first)
         if self.start_subtask:
             self.memory.reset(torch.ones(1, dtype=torch.bool), tokens)
-            self.queue, self.start_subtask = [], False
+            self.queue, self.start_subtask, self.next_chunk_at = [], False, self.t
+            self.ensemble.reset()  # a new subtask's chunks do not average with the last one's
         c = ex.context(z, self.memory, torch.tensor([self.subtask]))
         if self.t % cfg.memory_every == 0:
             self.memory.push(z)
-        if not self.queue:
-            state = state_tensor(observation)
-            normalised = ex.head.sample(ex.condition(c, state), cfg.flow_steps, self.generator,
-                                        cfg.sample_noise)
-            chunk = ex.normalizer.unaction(normalised, state)[0, :cfg.execute].double().numpy()
-            if self.ee is not None:  # grasp poses -> joint targets
-                chunk = self.ee.to_joints(chunk, np.asarray(observation["agent_pos"], np.float64))
-            self.queue = list(chunk)
-        action = self.queue.pop(0)
+        if cfg.temporal_ensemble > 0:
+            if self.t >= self.next_chunk_at:
+                self.ensemble.add(self.t, self.chunk(c, observation, cfg.horizon))
+                self.next_chunk_at = self.t + cfg.ensemble_every
+            action = self.ensemble.action(self.t)
+        else:
+            if not self.queue:
+                self.queue = list(self.chunk(c, observation, cfg.execute))
+            action = self.queue.pop(0)
         if self.decompose and self.ended(c):
             self.subtask_ended(inputs)
         self.t += 1
         return action
 
     # ------------------------------------------------------------------ helpers
+    def chunk(self, c: torch.Tensor, observation: dict[str, Any], length: int) -> np.ndarray:
+        """The first ``length`` joint targets of a chunk sampled from context c."""
+        ex, cfg = self.model.executor, self.cfg
+        state = state_tensor(observation)
+        normalised = ex.head.sample(ex.condition(c, state), cfg.flow_steps, self.generator,
+                                    cfg.sample_noise)
+        chunk = ex.normalizer.unaction(normalised, state)[0, :length].double().numpy()
+        if self.ee is not None:  # grasp poses -> joint targets
+            chunk = self.ee.to_joints(chunk, np.asarray(observation["agent_pos"], np.float64))
+        return chunk
+
     def inputs(self, observation: dict[str, Any]) -> list[torch.Tensor]:
         """What the executor encodes: one image (or its frozen backbone's feature map) per
         camera, or [environment_state, agent_pos] (a one-line ValueError if the observation

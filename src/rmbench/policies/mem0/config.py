@@ -19,7 +19,8 @@ ABLATIONS = TRAINED_ABLATIONS + INFERENCE_ABLATIONS
 @dataclass(frozen=True)
 class Mem0Config(ReadsObservation, PolicyConfig):
     # changeable at evaluation without retraining: mem0:CKPT?execute=5&flow_steps=20
-    INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps", "sample_noise")
+    INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps", "sample_noise",
+                                                   "temporal_ensemble", "ensemble_every")
 
     # --- observation
     observation: str = "auto"
@@ -86,6 +87,13 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     sample_noise: float = 1.0
     """Scale of the noise a chunk's sampling starts from: 1 draws from the distribution the
     head was trained on; below 1 leans towards the most likely chunk (0: deterministic)."""
+    temporal_ensemble: float = 0.0
+    """m > 0: ACT's temporal ensembling (policies/ensemble.py) in place of ``execute``: a chunk
+    every ``ensemble_every`` steps, and each step's action the mean of every chunk's
+    prediction for it weighted exp(-m i), i = 0 the oldest. 0: off."""
+    ensemble_every: int = 1
+    """With temporal_ensemble: steps between chunks (1 as in ACT; more costs less inference
+    and averages fewer predictions)."""
     # --- end classifier
     end_window: int = 8
     """L: a subtask ends after L consecutive positive steps; the last L frames of each
@@ -157,6 +165,11 @@ class Mem0Config(ReadsObservation, PolicyConfig):
                              "observation 'state'")
         if self.sample_noise < 0:
             raise ValueError(f"sample_noise must be >= 0, got {self.sample_noise}")
+        if self.temporal_ensemble < 0:
+            raise ValueError("temporal_ensemble must be >= 0 (0 turns it off)")
+        if not 1 <= self.ensemble_every <= self.horizon:
+            raise ValueError(f"ensemble_every ({self.ensemble_every}) must be in [1, "
+                             f"horizon={self.horizon}]")
         if self.action_space != "joints" and self.relative_actions:
             raise ValueError(f"relative_actions are offsets from the joints: with action_space "
                              f"{self.action_space!r} set relative_actions=false")

@@ -1,0 +1,39 @@
+"""Temporal ensembling of action chunks (ACT, Zhao et al. 2023): every stored chunk that covers
+the current step votes for its action, the oldest weighted most (exp(-m i), i = 0 the oldest).
+
+Averaging the overlapping predictions smooths the switch from one chunk to the next, where a
+policy that runs each chunk open-loop jumps; with m > 0 a fresh chunk moves the action only
+gradually, so one poor prediction cannot swing the arm.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class TemporalEnsemble:
+    def __init__(self, horizon: int, m: float):
+        if horizon < 1 or m < 0:
+            raise ValueError(f"temporal ensembling needs horizon >= 1 and m >= 0, got "
+                             f"{horizon} and {m}")
+        self.horizon, self.m = horizon, m
+        self.chunks: list[tuple[int, np.ndarray]] = []  # (step predicted at, chunk), oldest first
+
+    def reset(self) -> None:
+        self.chunks = []
+
+    def add(self, t: int, chunk: np.ndarray) -> None:
+        """Store the chunk predicted at step ``t`` (its first action is step t's)."""
+        if len(chunk) != self.horizon:
+            raise ValueError(f"chunk of {len(chunk)} actions, expected {self.horizon}")
+        self.chunks.append((t, chunk))
+
+    def action(self, t: int) -> np.ndarray:
+        """The weighted mean of every stored chunk's action for step ``t``; chunks that end
+        before t are dropped."""
+        self.chunks = [(t0, c) for t0, c in self.chunks if 0 <= t - t0 < self.horizon]
+        if not self.chunks:
+            raise RuntimeError(f"no stored chunk covers step {t}")
+        predictions = np.stack([c[t - t0] for t0, c in self.chunks])
+        weights = np.exp(-self.m * np.arange(len(predictions)))
+        return (weights / weights.sum()) @ predictions
