@@ -477,6 +477,23 @@ def test_state_noise_moves_object_positions_only(dataset):
     assert torch.equal(seen[0][0], batch[L.ENV_STATE])
     with pytest.raises(ValueError, match="joint_noise"):
         replace(TINY_STATE, joint_noise=-1.0)
+    # memory_noise blurs the chosen positions of what the anchor and the sliding window store,
+    # the current step's input exact
+    model = build_model(replace(TINY_STATE, memory_noise=0.01, memory_noise_on=("object0_",)),
+                        describe)
+    seen = []
+    encode = model.executor.encode
+    model.executor.encode = lambda inputs: (seen.append(inputs), encode(inputs))[1]
+    trainer = Mem0Trainer(model, 64, False, 0, names)
+    trainer(batch)
+    assert len(seen) == 2 and torch.equal(seen[0][0], batch[L.ENV_STATE])
+    delta = seen[1][0] - batch[L.ENV_STATE]
+    assert torch.equal(delta[:, ~chosen], torch.zeros_like(delta[:, ~chosen]))
+    assert float(delta[:, chosen].std()) == pytest.approx(0.01, rel=0.15)
+    anchor, _ = encode(seen[1])
+    torch.testing.assert_close(trainer.memory.anchor, anchor)  # every slot starts an episode
+    with pytest.raises(ValueError, match="memory_noise"):
+        replace(TINY, memory_noise=0.01)  # pixels
 
 
 def test_ee_actions_train_and_run_as_joint_targets(dataset, tmp_path):

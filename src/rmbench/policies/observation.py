@@ -122,10 +122,19 @@ def choose(requested: str, ds) -> str:
 def state_noise_scale(cfg: ReadsObservation, state_names) -> torch.Tensor | None:
     """Per-entry std of ``cfg.state_noise`` over the environment state's ``state_names``
     (zero where it does not apply), or None when no noise is asked for."""
-    if not (cfg.reads_state and cfg.state_noise > 0):
+    if not cfg.reads_state:
         return None
-    prefixes = tuple(cfg.state_noise_on)
-    return torch.tensor([cfg.state_noise if is_position(n) and (not prefixes or n.startswith(prefixes))
+    return position_noise_scale(cfg.state_noise, cfg.state_noise_on, state_names)
+
+
+def position_noise_scale(sigma: float, prefixes, state_names) -> torch.Tensor | None:
+    """``sigma`` on the position entries (``*_x``, ``*_y``, ``*_z``) of ``state_names`` whose
+    name starts with one of ``prefixes`` (all of them when empty), zero elsewhere; None when
+    sigma is 0."""
+    if not sigma > 0:
+        return None
+    prefixes = tuple(prefixes)
+    return torch.tensor([sigma if is_position(n) and (not prefixes or n.startswith(prefixes))
                          else 0.0 for n in state_names])
 
 

@@ -59,6 +59,14 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     memory_every: int = 5
     """z_img enters the sliding memory every this many control steps (at 20 Hz, K=8 spans 2 s);
     training walks each episode with this stride so it sees the memory inference builds."""
+    memory_noise: float = 0.0
+    """With observation "state", training only: N(0, sigma) metres more on the environment
+    state's positions in what enters the memories (the anchor and the sliding window), the
+    current step's input unchanged. The memories then say which layout the episode began in
+    only to about sigma, while the current step keeps what a grasp needs to the millimetre."""
+    memory_noise_on: tuple[str, ...] = ()
+    """Name prefixes of the position entries ``memory_noise`` applies to (empty: all of them),
+    e.g. ("cube_",)."""
     heads: int = 4
     """Attention heads in the memory fusion and the action head."""
     # --- action head
@@ -165,6 +173,11 @@ class Mem0Config(ReadsObservation, PolicyConfig):
                              "observation 'state'")
         if self.sample_noise < 0:
             raise ValueError(f"sample_noise must be >= 0, got {self.sample_noise}")
+        if not self.memory_noise >= 0:
+            raise ValueError(f"memory_noise must be >= 0, got {self.memory_noise}")
+        if self.memory_noise > 0 and not self.reads_state:
+            raise ValueError("memory_noise blurs the environment state: it needs observation "
+                             "'state'")
         if self.temporal_ensemble < 0:
             raise ValueError("temporal_ensemble must be >= 0 (0 turns it off)")
         if not 1 <= self.ensemble_every <= self.horizon:

@@ -25,7 +25,12 @@ from rmbench.policies.mem0.planner import Planner
 from rmbench.policies.nn.ema import EMA
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
-from rmbench.policies.observation import add_state_noise, joint_noise_scale, state_noise_scale
+from rmbench.policies.observation import (
+    add_state_noise,
+    joint_noise_scale,
+    position_noise_scale,
+    state_noise_scale,
+)
 
 ACTION_DIM = 14  # the joint state (and the joint action space)
 
@@ -97,6 +102,8 @@ class Mem0Trainer(nn.Module):
         self.decompose = decompose
         cfg = model.cfg
         self.noise_scale = state_noise_scale(cfg, state_names)
+        self.memory_scale = position_noise_scale(cfg.memory_noise, cfg.memory_noise_on,
+                                                 state_names)
         self.joint_scale = joint_noise_scale(cfg)
         self.memory = MemoryStore(batch_size, cfg.step_tokens, cfg.sliding_window, cfg.dim)
         self.last_subtask = torch.full((batch_size,), -1, dtype=torch.long)
@@ -128,14 +135,19 @@ class Mem0Trainer(nn.Module):
         state = add_state_noise(batch[L.STATE], self.joint_scale, self.generator)
         inputs = step_inputs(batch, cfg, cfg.cameras, self.generator, self.noise_scale, state)
         tokens, z = ex.encode(inputs)
+        # what the memories store: the same step, blurred further with memory_noise
+        memory_tokens, memory_z = tokens, z
+        if self.memory_scale is not None:
+            blurred = add_state_noise(inputs[0], self.memory_scale, self.generator)
+            memory_tokens, memory_z = ex.encode([blurred, *inputs[1:]])
         subtask = batch[L.SUBTASK_INDEX]
         reset = batch["episode_start"].bool()
         if self.decompose:
             reset = reset | (subtask != self.last_subtask)
-        self.memory.reset(reset, tokens)
+        self.memory.reset(reset, memory_tokens)
         self.last_subtask = subtask.clone()
         c = ex.context(z, self.memory, batch["text_index"])
-        self.memory.push(z)
+        self.memory.push(memory_z)
         target = ex.normalizer.action(batch[L.ACTION], batch[L.STATE])
         action_loss = ex.head.loss(ex.condition(c, state), target,
                                    batch["action_is_pad"], self.generator)
