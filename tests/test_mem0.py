@@ -413,6 +413,33 @@ def test_state_checkpoint_round_trip_and_the_pixel_observation_error(mn_state_ck
     env.close()
 
 
+def test_inference_runs_on_one_thread_whatever_the_process_has(mn_state_ckpt):
+    """A thread count changes a float reduction's order, and a closed loop turns the last bit
+    into another episode: act() runs on INFERENCE_THREADS and gives the caller's count back."""
+    from rmbench.policies.nn.inference import INFERENCE_THREADS
+
+    env = make("press_button", obs_type="environment_state_agent_pos")
+    policy = Mem0Policy(str(mn_state_ckpt), env)
+    obs, info = env.reset(seed=100001)
+    env.close()
+    policy.reset(info["instruction"], {"seed": 100001})
+    seen = []
+    encode = policy.model.executor.encode
+    policy.model.executor.encode = lambda inputs: (seen.append(torch.get_num_threads()),
+                                                   encode(inputs))[1]
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(2)
+        policy.act(obs)
+        assert seen == [INFERENCE_THREADS] and torch.get_num_threads() == 2
+        policy.model.executor.encode = lambda inputs: 1 / 0
+        with pytest.raises(ZeroDivisionError):
+            policy.act(obs)
+        assert torch.get_num_threads() == 2  # restored on an error too
+    finally:
+        torch.set_num_threads(before)
+
+
 def test_state_mem0_through_the_evaluation_harness(mn_state_ckpt, tmp_path):
     from rmbench.eval import EvalConfig, evaluate
     from rmbench.eval.harness import read_records

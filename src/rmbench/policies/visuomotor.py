@@ -35,6 +35,7 @@ from rmbench.policies.checkpoint import CheckpointError, load_weights, read_conf
 from rmbench.policies.config import PolicyConfig, parse_argument
 from rmbench.policies.feature_cache import features_key, with_features
 from rmbench.policies.nn.backbone import camera_encoders
+from rmbench.policies.nn.inference import inference
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.state import StateEncoder
 from rmbench.policies.nn.vision import color_jitter
@@ -272,7 +273,7 @@ class VisuomotorPolicy(BasePolicy):
         self.queue: list[np.ndarray] = []
         self.t = 0
 
-    @torch.no_grad()
+    @inference
     def act(self, observation: dict[str, Any]) -> np.ndarray:
         state = state_tensor(observation)
         features = self.model.observe(self.inputs(observation), state)

@@ -29,6 +29,7 @@ from rmbench.policies.mem0.config import TRAINED_ABLATIONS, Mem0Config
 from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import DONE
 from rmbench.policies.mem0.train import build_model, goal_text
+from rmbench.policies.nn.inference import inference
 from rmbench.policies.observation import camera_inputs, state_inputs, state_tensor
 
 
@@ -103,7 +104,7 @@ class Mem0Policy(BasePolicy):
         self.start_subtask = True
         self.stage = 0
 
-    @torch.no_grad()
+    @inference
     def act(self, observation: dict[str, Any]) -> np.ndarray:
         cfg, ex = self.cfg, self.model.executor
         inputs = self.inputs(observation)

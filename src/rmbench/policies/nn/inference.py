@@ -1,0 +1,37 @@
+"""Policy inference that gives the same numbers in every process: one intra-op thread, no
+autograd.
+
+A float reduction split over N threads sums in an order that depends on N, and a closed loop
+amplifies the last bit into a different episode: the same put_back_block checkpoint on the
+same seed succeeded with two torch threads and timed out with one. Evaluation runs episodes
+in parallel across processes, so one thread per episode costs it nothing; the thread count
+of the calling process (a training run's, say) is restored on return.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import TypeVar
+
+import torch
+
+INFERENCE_THREADS = 1
+
+F = TypeVar("F", bound=Callable)
+
+
+def inference(fn: F) -> F:
+    """Run ``fn`` under ``torch.no_grad`` with ``INFERENCE_THREADS`` intra-op threads."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        threads = torch.get_num_threads()
+        torch.set_num_threads(INFERENCE_THREADS)
+        try:
+            with torch.no_grad():
+                return fn(*args, **kwargs)
+        finally:
+            torch.set_num_threads(threads)
+
+    return wrapper  # type: ignore[return-value]
