@@ -37,8 +37,11 @@ class BatteryTryExpert(ScriptedExpert):
                             and axis[1] * np.sin(target_yaw) > 0.95)
 
             yield from m.clear_for(side)
-            yield from m.carry(side, Handle(locate, 2 * battery.radius, np.pi, OPENING, HOVER),
-                               (*slot, TABLE_TOP),
+            # in_hand: a cell must end within 1 cm of its slot's centre, with 8 mm of play to
+            # the plates; under a drifting arm only steering by the cell's offset in the hand
+            # gets it there reliably (see Motion.place).
+            handle = Handle(locate, 2 * battery.radius, np.pi, OPENING, HOVER, in_hand=True)
+            yield from m.carry(side, handle, (*slot, TABLE_TOP),
                                turn_to=lambda grip: wrap_angle(target_yaw - (grip - np.pi / 2)),
                                placed=seated)
 
