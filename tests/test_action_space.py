@@ -70,3 +70,25 @@ def test_pose_actions_round_trip_an_experts_targets(dataset):
 def test_unknown_action_space_is_a_one_line_error():
     with pytest.raises(ValueError, match="unknown action space 'cartesian'"):
         action_dim("cartesian")
+
+
+def test_reach_grid_puts_the_grasp_site_top_down_over_the_point():
+    """Where an arm reaches (put_back_block's mats and centre, from either arm), the grid's
+    interpolated joints put the grasp site within 2 mm of the point at the reach height,
+    pointing down, fingers across the reach direction."""
+    from rmbench.sim.geometry import top_down_mat
+    from rmbench.sim.kinematics import REACH_HEIGHT, natural_yaw, reach_grid
+    from rmbench.sim.station import TABLE_TOP
+
+    grid, kin, rng = reach_grid(), GraspKinematics(), np.random.default_rng(1)
+    for side, sign in (("left", -1), ("right", 1)):
+        for _ in range(40):
+            xy = np.array([sign * rng.uniform(-0.05, 0.25), rng.uniform(-0.25, 0.04)])
+            pos, mat = kin.forward(side, grid.joints(side, xy))
+            np.testing.assert_allclose(pos, [*xy, TABLE_TOP + REACH_HEIGHT], atol=2e-3)
+            np.testing.assert_allclose(mat, top_down_mat(natural_yaw(side, pos)), atol=2e-2)
+    # many points at once, and outside the area the edge's value
+    many = grid.joints("left", np.zeros((3, 4, 2)))
+    assert many.shape == (3, 4, 6)
+    np.testing.assert_allclose(grid.joints("left", np.array([9.0, 0.0])),
+                               grid.joints("left", np.array([grid.xs[-1], 0.0])))

@@ -588,6 +588,37 @@ def test_temporal_ensemble_averages_the_chunks_that_cover_a_step(mn_state_ckpt):
         replace(TINY_STATE, temporal_ensemble=-1.0)
 
 
+def test_reach_input_reads_positions_as_the_arms_reach_joints(dataset, tmp_path):
+    """reach_input: the named positions of the environment state enter the encoder as both
+    arms' top-down reach joints, normalised over the dataset; a name without _x/_y entries
+    is a one-line error, and pixels refuse the option."""
+    from rmbench.policies.nn.state import reach_joints
+
+    cfg = replace(TINY_STATE, reach_input=("object1", "object0"))
+    train_tiny(dataset, tmp_path / "r", cfg=cfg)
+    policy = Mem0Policy(str(tmp_path / "r"))
+    encoder = policy.model.executor.encoders
+    names = Dataset(dataset).state_names
+    assert encoder.reach_index.tolist() == [[names.index("object1_x"), names.index("object1_y")],
+                                            [names.index("object0_x"), names.index("object0_y")]]
+    ds = Dataset(dataset)
+    env = np.concatenate([ds.episode(e, cameras=[]).environment_state
+                          for e in range(ds.num_episodes)])
+    joints = reach_joints(env[:, encoder.reach_index.numpy()])
+    assert joints.shape == (len(env), 2 * 12)
+    torch.testing.assert_close(encoder.reach_mean, torch.as_tensor(joints.mean(0)), atol=1e-5,
+                               rtol=1e-5)
+    state = torch.as_tensor(env[:2])
+    agent = torch.zeros(2, 14)
+    moved = state.clone()
+    moved[:, names.index("object0_x")] += 0.05
+    assert not torch.allclose(encoder([state, agent]), encoder([moved, agent]))
+    with pytest.raises(ValueError, match=r"reach_input \['lamp'\] has no _x/_y"):
+        train_tiny(dataset, tmp_path / "bad", cfg=replace(TINY_STATE, reach_input=("lamp",)))
+    with pytest.raises(ValueError, match="reach_input"):
+        Mem0Config(observation="pixels", reach_input=("cube",))
+
+
 def test_grasp_pose_input_reads_the_joints_forward_kinematics(dataset, tmp_path):
     from rmbench.policies.action_space import EEActions
 

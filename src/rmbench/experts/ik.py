@@ -3,22 +3,17 @@
 from __future__ import annotations
 
 import mink
-import mujoco
 import numpy as np
 
 from rmbench.sim import robot
-from rmbench.sim.geometry import quat_to_mat
+from rmbench.sim.geometry import mat_to_quat, quat_to_mat, top_down_mat
 from rmbench.sim.kinematics import robot_model
 from rmbench.sim.station import home_action
 
 
 def top_down_quat(yaw: float) -> np.ndarray:
     """Gripper pointing straight down with its fingers closing along world direction ``yaw``."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    mat = np.array([[0.0, c, s], [0.0, s, -c], [-1.0, 0.0, 0.0]])
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, mat.reshape(9))
-    return quat
+    return mat_to_quat(top_down_mat(yaw))
 
 
 MAX_STEP = 0.2  # rad per IK iteration

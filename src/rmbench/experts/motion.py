@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rmbench.experts.ik import ArmIK, top_down_quat
+from rmbench.sim.kinematics import natural_yaw
 from rmbench.sim.simulator import ARM_ENTRIES, servo_setpoint
 from rmbench.sim.station import ARM_MOUNTS, HOME_ARM, home_action
 
@@ -81,12 +82,6 @@ def min_jerk(n: int) -> np.ndarray:
     """n samples in (0, 1] of the minimum-jerk profile."""
     s = np.arange(1, n + 1) / n
     return 10 * s**3 - 15 * s**4 + 6 * s**5
-
-
-def natural_yaw(side: str, xy) -> float:
-    """Finger axis for a top-down grasp with the wrist unrotated: across the reach direction."""
-    bx, by, _ = ARM_MOUNTS[side].pos
-    return float(np.arctan2(xy[1] - by, xy[0] - bx) + np.pi / 2)
 
 
 def grasp_yaw(side: str, xy, object_yaw: float, symmetry: float = np.pi / 2,

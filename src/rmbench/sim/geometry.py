@@ -10,6 +10,13 @@ def quat_z(yaw: float) -> np.ndarray:
     return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
 
 
+def top_down_mat(yaw: float) -> np.ndarray:
+    """A grasp site's rotation pointing straight down, fingers closing along world direction
+    ``yaw``."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[0.0, c, s], [0.0, s, -c], [-1.0, 0.0, 0.0]])
+
+
 def mat_to_quat(mat: np.ndarray) -> np.ndarray:
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, np.ascontiguousarray(mat, dtype=float).reshape(9))

@@ -5,6 +5,9 @@ Gauss-Newton on MuJoCo's site Jacobian, warm-started from given joints, that lea
 near-singular direction of a straight wrist: a pose read off joints by ``forward`` comes back
 as that pose. The experts' IK (experts/ik.py, mink with a posture task) plans far moves; this
 one follows nearby targets fast, one arm at a time (about a millisecond for both arms).
+
+``ReachGrid`` holds, for points of the table, the joints that put a grasp site straight down
+over them: a policy reading object positions can see them in its joint targets' terms.
 """
 
 from __future__ import annotations
@@ -15,7 +18,14 @@ import mujoco
 import numpy as np
 
 from rmbench.sim import robot
-from rmbench.sim.station import StationConfig, base_spec
+from rmbench.sim.geometry import top_down_mat
+from rmbench.sim.station import ARM_MOUNTS, HOME_ARM, TABLE_TOP, StationConfig, base_spec
+
+# ReachGrid's table area (world x, y; metres) and spacing: every task's pieces lie inside it.
+REACH_X = (-0.40, 0.40)
+REACH_Y = (-0.36, 0.16)
+REACH_SPACING = 0.02
+REACH_HEIGHT = 0.04  # the grasp site's height above the table: a 4 cm cube's top-down grasp
 
 
 @functools.cache
@@ -81,3 +91,66 @@ class GraspKinematics:
             if np.abs(step).max() < tol:
                 break
         return q
+
+
+def natural_yaw(side: str, xy) -> float:
+    """Finger axis for a top-down grasp with the wrist unrotated: across the reach direction."""
+    bx, by, _ = ARM_MOUNTS[side].pos
+    return float(np.arctan2(xy[1] - by, xy[0] - bx) + np.pi / 2)
+
+
+class ReachGrid:
+    """Each arm's joints for a top-down grasp at ``REACH_HEIGHT`` above the table, the wrist
+    unrotated (``natural_yaw``), on a ``REACH_SPACING`` grid over the table, read off by
+    bilinear interpolation (points outside the area take its edge's value).
+
+    A learned policy that outputs joint targets and reads object positions has to learn the
+    arm's inverse kinematics from its demonstrations, where they happen to have been; over a
+    layout it was not shown, a 12-demonstration fit of that map misses by centimetres. Given
+    the same positions already in joint terms (``reach_input`` in Mem-0's config), what is
+    left to learn is close to a selection and an offset. Solved once per process (about two
+    seconds), warm-starting each point from its neighbour so that the grid is one smooth
+    branch of the solutions."""
+
+    def __init__(self, height: float = REACH_HEIGHT):
+        kin = GraspKinematics()
+        self.xs = np.arange(REACH_X[0], REACH_X[1] + 1e-9, REACH_SPACING)
+        self.ys = np.arange(REACH_Y[0], REACH_Y[1] + 1e-9, REACH_SPACING)
+        z = TABLE_TOP + height
+        self.table = {}
+        for side in robot.SIDES:
+            grid = np.empty((len(self.xs), len(self.ys), 6))
+            # Outward from the point nearest the arm's base, each point from its solved
+            # neighbour: the grid is then one smooth branch (a far corner solved first lands
+            # on another, or on no solution).
+            bx, by, _ = ARM_MOUNTS[side].pos
+            start = (int(np.argmin(np.abs(self.xs - bx))), int(np.argmin(np.abs(self.ys - by))))
+            order = sorted(np.ndindex(len(self.xs), len(self.ys)),
+                           key=lambda ij: (abs(ij[0] - start[0]) + abs(ij[1] - start[1]), ij))
+            solved = np.zeros(grid.shape[:2], bool)
+            for i, j in order:
+                near = [(i + a, j + b) for a, b in ((-1, 0), (1, 0), (0, -1), (0, 1))
+                        if 0 <= i + a < len(self.xs) and 0 <= j + b < len(self.ys)
+                        and solved[i + a, j + b]]
+                seed = grid[near[0]] if near else np.asarray(HOME_ARM[side], np.float64)
+                pos = np.array([self.xs[i], self.ys[j], z])
+                grid[i, j] = kin.inverse(side, pos, top_down_mat(natural_yaw(side, pos)), seed,
+                                         iters=60)
+                solved[i, j] = True
+            self.table[side] = grid
+
+    def joints(self, side: str, xy: np.ndarray) -> np.ndarray:
+        """Points (..., 2) -> joints (..., 6) of ``side``'s arm."""
+        xy = np.asarray(xy, np.float64)
+        fx = np.clip((xy[..., 0] - self.xs[0]) / REACH_SPACING, 0, len(self.xs) - 1 - 1e-9)
+        fy = np.clip((xy[..., 1] - self.ys[0]) / REACH_SPACING, 0, len(self.ys) - 1 - 1e-9)
+        i, j = fx.astype(int), fy.astype(int)
+        u, v = (fx - i)[..., None], (fy - j)[..., None]
+        g = self.table[side]
+        return ((1 - u) * (1 - v) * g[i, j] + u * (1 - v) * g[i + 1, j]
+                + (1 - u) * v * g[i, j + 1] + u * v * g[i + 1, j + 1])
+
+
+@functools.cache
+def reach_grid() -> ReachGrid:
+    return ReachGrid()

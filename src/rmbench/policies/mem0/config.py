@@ -41,6 +41,12 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     """With observation "state": the encoder also reads the grasp sites' poses (forward
     kinematics of the joint state, in the "ee" action space's layout), so a policy predicting
     poses sees where its grippers are in the same terms."""
+    reach_input: tuple[str, ...] = ()
+    """With observation "state": positions of the environment state (the names before
+    ``_x`` / ``_y``, e.g. "cube") the encoder also reads as both arms' joints for a top-down
+    grasp there (``sim.kinematics.ReachGrid``): where an object is, in the joint targets'
+    terms. The anchor then holds, from the first frame, the joints that reach where the
+    object was."""
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
     """Cameras the executor reads, each through its own CNN."""
     image_size: tuple[int, int] = (96, 128)
@@ -171,6 +177,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
         if self.grasp_pose_input and self.observation == "pixels":
             raise ValueError("grasp_pose_input is read by the state encoder: it needs "
                              "observation 'state'")
+        if self.reach_input and self.observation == "pixels":
+            raise ValueError("reach_input is read by the state encoder: it needs observation "
+                             "'state'")
         if self.sample_noise < 0:
             raise ValueError(f"sample_noise must be >= 0, got {self.sample_noise}")
         if not self.memory_noise >= 0:

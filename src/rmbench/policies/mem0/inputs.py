@@ -22,7 +22,7 @@ def observation_encoder(cfg: Mem0Config, cameras: int, state_dim: int) -> nn.Mod
     MLP; either maps the step's inputs (``Mem0Policy.inputs``) to tokens (B, n, dim)."""
     if cfg.reads_state:
         return StateEncoder(state_dim, cfg.dim, cfg.state_tokens, cfg.state_hidden,
-                            grasp_pose=cfg.grasp_pose_input)
+                            grasp_pose=cfg.grasp_pose_input, reach=len(cfg.reach_input))
     return camera_encoders(cfg.backbone, cfg.backbone_stride, cameras, cfg.dim,
                            cfg.encoder_channels, cfg.keypoints)
 

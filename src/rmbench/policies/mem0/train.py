@@ -107,10 +107,13 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     if cfg.reads_state:
         poses = (EEActions().from_joints(np.concatenate([ep.state for ep in examples.low_dim]))
                  if cfg.grasp_pose_input else None)
+        env_states = np.concatenate([ep.environment_state for ep in examples.low_dim])
         for encoder in (model.executor.encoders, model.planner.encoders):
             encoder.set_stats(stats, L.ENV_STATE, L.STATE)
             if poses is not None:
                 encoder.set_pose_stats(poses)
+            if cfg.reach_input:
+                encoder.set_reach(ds.state_names, cfg.reach_input, env_states)
     out = Path(out)
     planner_report = None
     if decompose and not (out / STATE).exists():

@@ -1,7 +1,8 @@
 """The state observation's encoder, in place of the CNNs when a policy reads
 ``observation.environment_state`` (``observation="state"`` in its config).
 
-    [environment_state; agent_pos; (grasp poses)] (normalised) -> MLP -> tokens (B, n, dim)
+    [environment_state; agent_pos; (grasp poses); (reach joints)] (normalised)
+        -> MLP -> tokens (B, n, dim)
 
 Both parts are normalised to zero mean and unit variance with the training dataset's
 statistics, stored here as buffers so that a checkpoint carries them. An entry that is constant
@@ -18,9 +19,31 @@ import torch
 from torch import nn
 
 from rmbench.policies.action_space import EE_DIM, EEActions
+from rmbench.sim import robot
+from rmbench.sim.kinematics import reach_grid
 
 STD_FLOOR = 1e-2
 CONSTANT = 1e-6  # a spread below this is an entry the dataset never varies
+REACH_ARM = 6  # joints per arm of a reach input
+
+
+def reach_indices(state_names, names) -> np.ndarray:
+    """Positions of ``{name}_x`` and ``{name}_y`` in ``state_names`` for each of ``names``
+    (n, 2); a one-line error naming what is missing."""
+    index = {n: i for i, n in enumerate(state_names)}
+    missing = [n for n in names if f"{n}_x" not in index or f"{n}_y" not in index]
+    if missing:
+        have = sorted({n[:-2] for n in state_names if n.endswith("_x")})
+        raise ValueError(f"reach_input {missing} has no _x/_y entries in the environment "
+                         f"state; positions there: {', '.join(have)}")
+    return np.array([[index[f"{n}_x"], index[f"{n}_y"]] for n in names], np.int64)
+
+
+def reach_joints(xy: np.ndarray) -> np.ndarray:
+    """Positions (..., n, 2) -> both arms' top-down reach joints (..., n * 12), float32."""
+    grid = reach_grid()
+    joints = np.concatenate([grid.joints(side, xy) for side in robot.SIDES], -1)
+    return joints.reshape(*xy.shape[:-2], -1).astype(np.float32)
 
 
 def safe_std(std) -> np.ndarray:
@@ -34,7 +57,7 @@ class StateEncoder(nn.Module):
     either. Two hidden GELU layers of width ``hidden``, a LayerNorm per token."""
 
     def __init__(self, state_dim: int, dim: int, tokens: int = 1, hidden: int = 256,
-                 agent_dim: int = 14, grasp_pose: bool = False):
+                 agent_dim: int = 14, grasp_pose: bool = False, reach: int = 0):
         super().__init__()
         if state_dim < 1:
             raise ValueError("a state encoder needs the environment state's length (>= 1)")
@@ -49,7 +72,16 @@ class StateEncoder(nn.Module):
         if grasp_pose:  # (only then: checkpoints from before the option load as they are)
             self.register_buffer("pose_mean", torch.zeros(pose_dim))
             self.register_buffer("pose_std", torch.ones(pose_dim))
-        self.mlp = nn.Sequential(nn.Linear(state_dim + agent_dim + pose_dim, hidden), nn.GELU(),
+        # ``reach`` named positions of the environment state, each as both arms' joints for a
+        # top-down grasp there (sim.kinematics.ReachGrid; set_reach says which entries)
+        reach_dim = 2 * REACH_ARM * reach
+        if reach:
+            self.register_buffer("reach_index", torch.zeros(reach, 2, dtype=torch.long))
+            self.register_buffer("reach_mean", torch.zeros(reach_dim))
+            self.register_buffer("reach_std", torch.ones(reach_dim))
+        self.reach = reach
+        self.mlp = nn.Sequential(nn.Linear(state_dim + agent_dim + pose_dim + reach_dim, hidden),
+                                 nn.GELU(),
                                  nn.Linear(hidden, hidden), nn.GELU(),
                                  nn.Linear(hidden, tokens * dim))
         self.norm = nn.LayerNorm(dim)
@@ -76,6 +108,18 @@ class StateEncoder(nn.Module):
             self.pose_mean.copy_(torch.as_tensor(poses.mean(0), dtype=torch.float32))
             self.pose_std.copy_(torch.as_tensor(safe_std(poses.std(0)), dtype=torch.float32))
 
+    def set_reach(self, state_names, names, env_states: np.ndarray) -> None:
+        """With ``reach``: which entries are the named positions (``{name}_x``, ``{name}_y``),
+        and the mean and spread of their reach joints over a dataset's environment states."""
+        if len(names) != self.reach:
+            raise ValueError(f"the encoder reads {self.reach} reach positions, got {len(names)}")
+        index = reach_indices(state_names, names)
+        joints = reach_joints(np.asarray(env_states)[:, index])
+        with torch.no_grad():
+            self.reach_index.copy_(torch.from_numpy(index))
+            self.reach_mean.copy_(torch.as_tensor(joints.mean(0), dtype=torch.float32))
+            self.reach_std.copy_(torch.as_tensor(safe_std(joints.std(0)), dtype=torch.float32))
+
     def forward(self, inputs: list[torch.Tensor]) -> torch.Tensor:
         env_state, agent_pos = inputs
         parts = [(env_state.float() - self.state_mean) / self.state_std,
@@ -84,5 +128,9 @@ class StateEncoder(nn.Module):
             flat = agent_pos.detach().reshape(-1, agent_pos.shape[-1]).cpu().numpy()
             pose = torch.from_numpy(self.poses.from_joints(flat)).to(agent_pos.device)
             parts.append((pose.reshape(*agent_pos.shape[:-1], -1) - self.pose_mean) / self.pose_std)
+        if self.reach:
+            xy = env_state.detach()[..., self.reach_index].cpu().numpy()
+            joints = torch.from_numpy(reach_joints(xy)).to(env_state.device)
+            parts.append((joints - self.reach_mean) / self.reach_std)
         x = torch.cat(parts, -1)
         return self.norm(self.mlp(x).unflatten(-1, (self.tokens, self.dim)))
