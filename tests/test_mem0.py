@@ -642,3 +642,44 @@ def test_grasp_pose_input_reads_the_joints_forward_kinematics(dataset, tmp_path)
     from rmbench.policies.nn.state import StateEncoder
 
     assert not any("pose" in k for k in StateEncoder(4, 8).state_dict())
+
+
+def test_layout_copies_train_on_demonstrations_moved_across_the_table(dataset, tmp_path):
+    """A shifted copy moves every x/y entry of the environment state by the shift and each
+    grasp site's path with it (scaled down near the rest pose), turns the wrist with the
+    reach direction rather than rolling the forearm, and keeps the grippers; training reads
+    the copies beside the demonstrations."""
+    from rmbench.policies.layout_shift import REST_RADIUS, LayoutShift, xy_columns
+    from rmbench.sim.kinematics import GraspKinematics
+    from rmbench.sim.station import HOME_ARM
+
+    ds = Dataset(dataset)
+    ep = ds.episode(0, cameras=[])
+    delta = np.array([0.02, -0.015])
+    moved = LayoutShift(ds.state_names).shift(ep, delta)
+    xs, ys = xy_columns(ds.state_names)
+    np.testing.assert_allclose(moved.environment_state[:, xs] - ep.environment_state[:, xs],
+                               delta[0], atol=1e-6)
+    np.testing.assert_allclose(moved.environment_state[:, ys] - ep.environment_state[:, ys],
+                               delta[1], atol=1e-6)
+    kin = GraspKinematics()
+    for k, side in enumerate(("left", "right")):
+        rest = kin.forward(side, np.asarray(HOME_ARM[side], float))[0]
+        cols = slice(7 * k, 7 * k + 6)
+        for t in range(0, len(ep), 7):
+            before = kin.forward(side, ep.action[t, cols])[0]
+            after = kin.forward(side, moved.action[t, cols])[0]
+            w = np.clip(np.linalg.norm(before - rest) / REST_RADIUS - 1, 0, 1)
+            np.testing.assert_allclose(after - before, [*(w * delta), 0.0], atol=3e-3)
+        assert np.abs(moved.action[:, 7 * k + 3] - ep.action[:, 7 * k + 3]).max() < 0.02
+    np.testing.assert_array_equal(moved.action[:, [6, 13]], ep.action[:, [6, 13]])
+    assert LayoutShift(ds.state_names).shift(ep, (5.0, 0.0)) is None  # out of reach: no copy
+
+    cfg = replace(TINY_STATE, layout_copies=2, layout_shift=0.02)
+    train_tiny(dataset, tmp_path / "s", cfg=cfg)
+    describe = json.loads((tmp_path / "s" / "config.json").read_text())
+    assert 0 < describe["layout_copies_kept"] <= 2 * ds.num_episodes
+    with pytest.raises(ValueError, match="layout_copies"):
+        Mem0Config(observation="pixels", layout_copies=1, layout_shift=0.01)
+    with pytest.raises(ValueError, match="layout_copies"):
+        replace(TINY_STATE, layout_copies=-1)

@@ -112,6 +112,19 @@ class DemoDataset(torch.utils.data.Dataset):
         self.starts = np.concatenate([[0], np.cumsum(lengths)])
         self.lengths = lengths
 
+    def add_episodes(self, episodes: list) -> None:
+        """Append episodes held in memory (``reader.Episode``, e.g. augmented copies of this
+        dataset's own). They have no frames, so only a dataset read without cameras takes
+        them."""
+        if self.cameras:
+            raise ValueError("episodes added in memory have no frames: read the dataset "
+                             "without cameras to add them")
+        self.low_dim += episodes
+        self.episode_ids += [ep.index for ep in episodes]
+        self.task_index += [self.ds.instructions.index(ep.instruction) for ep in episodes]
+        self.lengths = np.array([len(ep) for ep in self.low_dim], dtype=np.int64)
+        self.starts = np.concatenate([[0], np.cumsum(self.lengths)])
+
     def __len__(self) -> int:
         return int(self.starts[-1])
 

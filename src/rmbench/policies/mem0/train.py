@@ -21,6 +21,7 @@ from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCa
 from rmbench.policies.action_space import EE_DIM, EEActions
 from rmbench.policies.checkpoint import save_checkpoint
 from rmbench.policies.feature_cache import FeatureCache, with_features
+from rmbench.policies.layout_shift import shifted_copies
 from rmbench.policies.mem0.classifier import end_labels
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
@@ -54,7 +55,12 @@ class Mem0Frames(DemoDataset):
                          image_size=cfg.image_size, stride=cfg.memory_every,
                          environment_state=cfg.reads_state, **kw)
         self.decompose, self.goal_index = decompose, goal_index
+        self.end_window = cfg.end_window
         self.labels = [end_labels(ep.subtask_index, cfg.end_window) for ep in self.low_dim]
+
+    def add_episodes(self, episodes: list) -> None:
+        super().add_episodes(episodes)
+        self.labels += [end_labels(ep.subtask_index, self.end_window) for ep in episodes]
 
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
         item = super().__getitem__(i)
@@ -98,6 +104,10 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     torch.manual_seed(train_cfg.seed)
     model = build_model(cfg, describe, vectors)
     examples = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
+    if cfg.layout_copies:
+        examples.add_episodes(shifted_copies(examples.low_dim, ds.state_names, cfg.layout_copies,
+                                             cfg.layout_shift, train_cfg.seed))
+        describe["layout_copies_kept"] = len(examples.low_dim) - ds.num_episodes
     stats = dataset_stats(ds)
     if cfg.action_space == "ee":
         norm = to_pose_actions(examples, stats, cfg.horizon)

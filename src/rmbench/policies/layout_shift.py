@@ -1,0 +1,103 @@
+"""More layouts from the same demonstrations: each one replayed with its whole scene moved.
+
+A demonstration on the state observation is one layout. Moved by (dx, dy) on the table, every
+position in the environment state moves by it, and the arms would have done the same thing
+there: each grasp site's path moves by it too. The shifted copy's joints (measured and
+commanded) are those poses solved by inverse kinematics, each frame warm-started from the
+previous one's solution, the grippers as recorded. Each pose also turns about the vertical
+by the change in its direction from the arm's base (a few degrees), as the experts' grasps
+do (``natural_yaw``): kept at the recorded world orientation instead, the wrist would have
+to roll the forearm by a quarter radian, where every demonstration holds it within 0.03.
+
+An arm at its tucked rest pose does not go anywhere with the scene, so the shift is scaled by
+how far a grasp site is from its rest position: none within ``REST_RADIUS`` of it, all of it
+from twice that on. The rest pose's joints stay exact, which is where every evaluation starts.
+
+A copy whose solved poses miss by more than ``MAX_MISS`` anywhere (a shift out of an arm's
+reach) is left out. This is kinematics only: the copy is what the recorded arm motion would
+be over the moved scene, not a new simulation of it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from rmbench.data.reader import Episode
+from rmbench.sim import robot
+from rmbench.sim.kinematics import GraspKinematics, natural_yaw
+from rmbench.sim.station import HOME_ARM
+
+REST_RADIUS = 0.05  # m: within this of its rest position a grasp site is not shifted
+MAX_MISS = 0.003  # m: a solved pose farther than this from its shifted target drops the copy
+
+
+def xy_columns(state_names) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the environment state's x and y position entries."""
+    xs = [i for i, n in enumerate(state_names) if n.endswith("_x")]
+    ys = [i for i, n in enumerate(state_names) if n.endswith("_y")]
+    return np.array(xs, np.int64), np.array(ys, np.int64)
+
+
+class LayoutShift:
+    """Shifted copies of episodes (one instance per process: it holds a MuJoCo buffer)."""
+
+    def __init__(self, state_names):
+        self.kin = GraspKinematics()
+        self.xs, self.ys = xy_columns(state_names)
+        self.rest = {side: self.kin.forward(side, np.asarray(HOME_ARM[side], float))[0]
+                     for side in robot.SIDES}
+
+    def _joints(self, q: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
+        """Joint rows (T, 14) of one episode with each grasp site moved by ``delta`` (scaled
+        by its distance from rest); None if a pose cannot be reached."""
+        out = np.array(q, np.float64)
+        for k, side in enumerate(robot.SIDES):
+            cols = slice(7 * k, 7 * k + 6)
+            seed = out[0, cols].copy()
+            for t in range(len(out)):
+                pos, mat = self.kin.forward(side, out[t, cols])
+                w = np.clip(np.linalg.norm(pos - self.rest[side]) / REST_RADIUS - 1.0, 0.0, 1.0)
+                if w == 0.0:
+                    seed = out[t, cols].copy()
+                    continue
+                target = pos + w * np.array([delta[0], delta[1], 0.0])
+                turn = natural_yaw(side, target) - natural_yaw(side, pos)
+                c, s = np.cos(turn), np.sin(turn)
+                rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+                seed = self.kin.inverse(side, target, rz @ mat, seed)
+                if np.linalg.norm(self.kin.forward(side, seed)[0] - target) > MAX_MISS:
+                    return None
+                out[t, cols] = seed
+        return out.astype(np.float32)
+
+    def shift(self, ep: Episode, delta) -> Episode | None:
+        """``ep`` with its scene moved by ``delta`` (dx, dy metres); None if out of reach."""
+        delta = np.asarray(delta, np.float64)
+        state = self._joints(ep.state, delta)
+        action = None if state is None else self._joints(ep.action, delta)
+        if action is None:
+            return None
+        env = np.array(ep.environment_state, np.float32)
+        env[:, self.xs] += np.float32(delta[0])
+        env[:, self.ys] += np.float32(delta[1])
+        return replace(ep, state=state, action=action, environment_state=env)
+
+
+def shifted_copies(episodes: list[Episode], state_names, copies: int, reach: float,
+                   seed: int) -> list[Episode]:
+    """``copies`` shifted copies of each episode, each by (dx, dy) ~ U[-reach, reach]^2 drawn
+    from ``seed``; copies out of reach are left out (so fewer may come back)."""
+    if copies < 0 or reach < 0:
+        raise ValueError(f"layout copies and shift must be >= 0, got {copies} and {reach}")
+    if copies == 0 or reach == 0:
+        return []
+    shifter, rng = LayoutShift(state_names), np.random.default_rng(seed)
+    out = []
+    for ep in episodes:
+        for _ in range(copies):
+            moved = shifter.shift(ep, rng.uniform(-reach, reach, 2))
+            if moved is not None:
+                out.append(moved)
+    return out
