@@ -323,6 +323,31 @@ def test_state_noise_reaches_the_baselines_encoder(name, dataset):
     assert torch.equal(moved[:, 6], torch.zeros_like(moved[:, 6]))
 
 
+@pytest.mark.parametrize("name", sorted(BASELINES))
+def test_baselines_read_grasp_poses_and_train_on_layout_copies(name, dataset, tmp_path):
+    """Mem-0's state recipe is the baselines' too: the grasp poses as input (normalised over
+    the examples, copies included) and demonstrations moved across the table."""
+    import json
+
+    from rmbench.data.reader import Dataset
+
+    cfg = replace(state_cfg(name), grasp_pose_input=True, layout_copies=2, layout_shift=0.02)
+    train_tiny(name, dataset, tmp_path / "g", cfg=cfg)
+    describe = json.loads((tmp_path / "g" / "config.json").read_text())
+    ds = Dataset(dataset)
+    assert 0 < describe["layout_copies_kept"] <= 2 * ds.num_episodes
+    policy = BASELINES[name][2](str(tmp_path / "g"))
+    encoder = policy.model.encoders
+    assert encoder.poses is not None and float(encoder.pose_std.min()) > 0
+    joints = torch.tensor(ds.episode(0, cameras=[]).state[:2])
+    moved = joints.clone()
+    moved[:, 0] += 0.1  # a waist turn moves the left grasp pose, hence the tokens
+    env_state = torch.zeros(2, encoder.state_dim)
+    assert not torch.allclose(encoder([env_state, joints]), encoder([env_state, moved]))
+    with pytest.raises(ValueError, match="layout_copies"):
+        replace(BASELINES[name][0], observation="pixels", layout_copies=1, layout_shift=0.01)
+
+
 def test_state_checkpoint_round_trip_and_the_pixel_observation_error(state_ckpt):
     name, path = state_ckpt
     policy_cls = BASELINES[name][2]

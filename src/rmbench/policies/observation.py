@@ -73,6 +73,17 @@ class ReadsObservation:
     policy reads at every training frame (the grippers' openings, and the state relative
     actions are measured from, stay exact). Fifty demonstrations are also fifty joint
     trajectories: the noise keeps the policy from recognising one by the arm's exact pose."""
+    grasp_pose_input: bool = False
+    """With observation "state": the encoder also reads the grasp sites' poses (forward
+    kinematics of the joint state, in the "ee" action space's layout): where the grippers
+    are in the terms the environment state gives the objects' positions."""
+    layout_copies: int = 0
+    """With observation "state": training also reads this many copies of each demonstration
+    with its whole scene moved on the table by up to ``layout_shift`` metres in x and y, the
+    arms' joints solved for the moved grasp poses (``policies/layout_shift.py``): fifty
+    demonstrations are fifty layouts, and joint targets do not move with a layout."""
+    layout_shift: float = 0.0
+    """With ``layout_copies``: the largest shift (metres) along each table axis."""
 
     def __post_init__(self):
         super().__post_init__()
@@ -81,6 +92,15 @@ class ReadsObservation:
             raise ValueError(f"state_noise must be >= 0, got {self.state_noise}")
         if not self.joint_noise >= 0:
             raise ValueError(f"joint_noise must be >= 0, got {self.joint_noise}")
+        if self.grasp_pose_input and self.observation == PIXELS:
+            raise ValueError("grasp_pose_input is read by the state encoder: it needs "
+                             "observation 'state'")
+        if self.layout_copies < 0 or not self.layout_shift >= 0:
+            raise ValueError(f"layout_copies and layout_shift must be >= 0, got "
+                             f"{self.layout_copies} and {self.layout_shift}")
+        if self.layout_copies and self.observation == PIXELS:
+            raise ValueError("layout_copies moves the environment state: it needs observation "
+                             "'state'")
 
     @property
     def reads_state(self) -> bool:
@@ -117,6 +137,16 @@ def choose(requested: str, ds) -> str:
         raise ValueError(f"{ds.root} has no camera videos: train on the state "
                          f"(--set observation=state)")
     return choice
+
+
+def set_state_stats(encoder, stats: dict[str, dict[str, np.ndarray]], episodes) -> None:
+    """A state encoder's (``nn/state.py``) normalisers: the dataset's statistics of the
+    environment and joint states and, when it reads them, the grasp poses' over the training
+    examples' joint states (``episodes``, layout copies included)."""
+    encoder.set_stats(stats, L.ENV_STATE, L.STATE)
+    if encoder.poses is not None:
+        encoder.set_pose_stats(encoder.poses.from_joints(
+            np.concatenate([ep.state for ep in episodes])))
 
 
 def state_noise_scale(cfg: ReadsObservation, state_names) -> torch.Tensor | None:

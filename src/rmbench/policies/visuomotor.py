@@ -34,6 +34,7 @@ from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config, save_checkpoint
 from rmbench.policies.config import PolicyConfig, parse_argument
 from rmbench.policies.feature_cache import features_key, with_features
+from rmbench.policies.layout_shift import add_layout_copies
 from rmbench.policies.nn.backbone import camera_encoders
 from rmbench.policies.nn.inference import inference
 from rmbench.policies.nn.normalize import Normalizer
@@ -46,6 +47,7 @@ from rmbench.policies.observation import (
     check_observation,
     choose,
     joint_noise_scale,
+    set_state_stats,
     state_inputs,
     state_noise_scale,
     state_tensor,
@@ -122,7 +124,8 @@ def observation_encoder(cfg: VisuomotorConfig, state_dim: int, keypoints: int,
     """The CNNs or backbone heads (one per camera; ``pooled=False``: feature maps) or, with
     observation "state", the state MLP (``cfg.state_tokens`` tokens (B, n, cfg.dim))."""
     if cfg.reads_state:
-        return StateEncoder(state_dim, cfg.dim, cfg.state_tokens, cfg.state_hidden)
+        return StateEncoder(state_dim, cfg.dim, cfg.state_tokens, cfg.state_hidden,
+                            grasp_pose=cfg.grasp_pose_input)
     return camera_encoders(cfg.backbone, cfg.backbone_stride, len(cfg.cameras), cfg.dim,
                            cfg.encoder_channels, keypoints, pooled)
 
@@ -210,16 +213,18 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
     model = model_cls(cfg, len(ds.state_names or ()) if cfg.reads_state else 0)
     norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
     model.normalizer.load_state_dict(norm.state_dict())
-    if cfg.reads_state:
-        from rmbench.data.stats import from_json
-
-        stats = from_json(json.loads((ds.root / L.STATS).read_text()))
-        model.encoders.set_stats(stats, L.ENV_STATE, L.STATE)
-    trainer = trainer_cls(model, train_cfg.seed, tuple(ds.state_names or ()))
     frames = DemoDataset(ds, chunk=cfg.horizon,
                          cameras=[] if cfg.reads_state or cfg.reads_features else list(cfg.cameras),
                          image_size=cfg.image_size, history=cfg.obs_steps,
                          environment_state=cfg.reads_state)
+    if cfg.layout_copies:
+        describe["layout_copies_kept"] = add_layout_copies(frames, cfg, train_cfg.seed)
+    if cfg.reads_state:
+        from rmbench.data.stats import from_json
+
+        stats = from_json(json.loads((ds.root / L.STATS).read_text()))
+        set_state_stats(model.encoders, stats, frames.low_dim)
+    trainer = trainer_cls(model, train_cfg.seed, tuple(ds.state_names or ()))
     frames = with_features(frames, ds, cfg)
 
     def batches(start: int, rank: int, world: int):

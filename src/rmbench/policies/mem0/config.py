@@ -37,23 +37,12 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     """With observation "state": tokens per step (the anchor's slots, as cameras are with pixels)."""
     state_hidden: int = 256
     """With observation "state": hidden width of the state encoder's two layers."""
-    grasp_pose_input: bool = False
-    """With observation "state": the encoder also reads the grasp sites' poses (forward
-    kinematics of the joint state, in the "ee" action space's layout), so a policy predicting
-    poses sees where its grippers are in the same terms."""
     reach_input: tuple[str, ...] = ()
     """With observation "state": positions of the environment state (the names before
     ``_x`` / ``_y``, e.g. "cube") the encoder also reads as both arms' joints for a top-down
     grasp there (``sim.kinematics.ReachGrid``): where an object is, in the joint targets'
     terms. The anchor then holds, from the first frame, the joints that reach where the
     object was."""
-    layout_copies: int = 0
-    """With observation "state": training also reads this many copies of each demonstration
-    with its whole scene moved on the table by up to ``layout_shift`` metres in x and y, the
-    arms' joints solved for the moved grasp poses (``policies/layout_shift.py``): fifty
-    demonstrations are fifty layouts, and joint targets do not move with a layout."""
-    layout_shift: float = 0.0
-    """With ``layout_copies``: the largest shift (metres) along each table axis."""
     cameras: tuple[str, ...] = ("head", "left_wrist", "right_wrist")
     """Cameras the executor reads, each through its own CNN."""
     image_size: tuple[int, int] = (96, 128)
@@ -181,17 +170,8 @@ class Mem0Config(ReadsObservation, PolicyConfig):
             raise ValueError(f"action_patch ({self.action_patch}) must be >= 1 and divide the "
                              f"horizon ({self.horizon})")
         action_dim(self.action_space)  # a one-line error for an unknown space
-        if self.grasp_pose_input and self.observation == "pixels":
-            raise ValueError("grasp_pose_input is read by the state encoder: it needs "
-                             "observation 'state'")
         if self.reach_input and self.observation == "pixels":
             raise ValueError("reach_input is read by the state encoder: it needs observation "
-                             "'state'")
-        if self.layout_copies < 0 or not self.layout_shift >= 0:
-            raise ValueError(f"layout_copies and layout_shift must be >= 0, got "
-                             f"{self.layout_copies} and {self.layout_shift}")
-        if self.layout_copies and self.observation == "pixels":
-            raise ValueError("layout_copies moves the environment state: it needs observation "
                              "'state'")
         if self.sample_noise < 0:
             raise ValueError(f"sample_noise must be >= 0, got {self.sample_noise}")

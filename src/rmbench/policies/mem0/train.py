@@ -21,7 +21,7 @@ from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCa
 from rmbench.policies.action_space import EE_DIM, EEActions
 from rmbench.policies.checkpoint import save_checkpoint
 from rmbench.policies.feature_cache import FeatureCache, with_features
-from rmbench.policies.layout_shift import shifted_copies
+from rmbench.policies.layout_shift import add_layout_copies
 from rmbench.policies.mem0.classifier import end_labels
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
@@ -29,7 +29,7 @@ from rmbench.policies.mem0.planner import DONE, planner_examples, planner_loss
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import MINILM_DIM, sentence_embeddings
 from rmbench.policies.nn.vision import color_jitter
-from rmbench.policies.observation import choose
+from rmbench.policies.observation import choose, set_state_stats
 from rmbench.tasks import get_task
 from rmbench.training.batches import batch_stream
 from rmbench.training.loop import STATE, TrainConfig, lr_at, train
@@ -105,9 +105,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     model = build_model(cfg, describe, vectors)
     examples = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
     if cfg.layout_copies:
-        examples.add_episodes(shifted_copies(examples.low_dim, ds.state_names, cfg.layout_copies,
-                                             cfg.layout_shift, train_cfg.seed))
-        describe["layout_copies_kept"] = len(examples.low_dim) - ds.num_episodes
+        describe["layout_copies_kept"] = add_layout_copies(examples, cfg, train_cfg.seed)
     stats = dataset_stats(ds)
     if cfg.action_space == "ee":
         norm = to_pose_actions(examples, stats, cfg.horizon)
@@ -115,13 +113,9 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
     model.executor.normalizer.load_state_dict(norm.state_dict())
     if cfg.reads_state:
-        poses = (EEActions().from_joints(np.concatenate([ep.state for ep in examples.low_dim]))
-                 if cfg.grasp_pose_input else None)
         env_states = np.concatenate([ep.environment_state for ep in examples.low_dim])
         for encoder in (model.executor.encoders, model.planner.encoders):
-            encoder.set_stats(stats, L.ENV_STATE, L.STATE)
-            if poses is not None:
-                encoder.set_pose_stats(poses)
+            set_state_stats(encoder, stats, examples.low_dim)
             if cfg.reach_input:
                 encoder.set_reach(ds.state_names, cfg.reach_input, env_states)
     out = Path(out)
