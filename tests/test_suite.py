@@ -121,6 +121,9 @@ def test_toy_table_end_to_end_and_resumed(toy_table, capsys):
         assert row["episodes"] == 1 and 0 <= row["success_rate"] <= 1 and row["train_wall_s"] > 0
     text = (out / "table.md").read_text()
     assert "| observe_and_pickup | M(1) |" in text and "(published)" in text
+    # each task's chance level beside the published numbers, and what it assumes
+    assert "chance (no memory) |" in text and "- observe_and_pickup: 24.0%" in text
+    assert res["chance"]["observe_and_pickup"]["rate"] == pytest.approx(0.24, abs=0.01)
     # a re-run finds every cell done: no job runs, nothing is rewritten but the tables
     checkpoint = out / "observe_and_pickup" / "train" / "mem0-s6-b4" / "model.safetensors"
     mtime = checkpoint.stat().st_mtime_ns

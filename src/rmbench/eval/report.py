@@ -11,6 +11,7 @@ import html
 import json
 from pathlib import Path
 
+from rmbench.eval.chance import chance
 from rmbench.eval.harness import read_records
 from rmbench.tasks.registry import ordered
 from rmbench.video import write_atomic
@@ -59,12 +60,16 @@ def load_runs(folders: list[str | Path], labels: list[str] | None = None) -> lis
 
 
 def table(runs: list[dict], published: list[str], metric: str = "success_rate",
-          tasks: list[str] | None = None) -> tuple[list[str], list[list]]:
+          tasks: list[str] | None = None, with_chance: bool = False
+          ) -> tuple[list[str], list[list]]:
     """Header and rows: task, TMC, one value (%) of ``metric`` (success_rate or mean_progress)
-    per column; None where not evaluated. Published numbers exist for success rates only.
-    ``tasks`` keeps only those rows (default: all nine)."""
+    per column; None where not evaluated. Published numbers exist for success rates only, and
+    so does the last column ``with_chance`` adds: the task's chance level for a policy
+    without memory (``eval/chance.py``). ``tasks`` keeps only those rows (default: all nine)."""
     published = published if metric == "success_rate" else []
-    header = ["task", "TMC"] + [r["name"] for r in runs] + [f"{p} (published)" for p in published]
+    with_chance = with_chance and metric == "success_rate"
+    header = (["task", "TMC"] + [r["name"] for r in runs] + [f"{p} (published)" for p in published]
+              + ["chance (no memory)"] * with_chance)
     rows: list[list] = []
     for group in ("M(1)", "M(n)"):
         names = [c.name for c in ordered() if c.tmc == group and (tasks is None or c.name in tasks)]
@@ -74,6 +79,7 @@ def table(runs: list[dict], published: list[str], metric: str = "success_rate",
         for t in names:
             vals = [100 * r["summary"]["tasks"][t][metric] if t in r["summary"]["tasks"]
                     else None for r in runs] + [PUBLISHED[p][t] for p in published]
+            vals += [100 * chance(t).rate] * with_chance
             group_rows.append([t, group, *vals])
         rows.extend(group_rows)
         rows.append([f"average {group}", group, *_averages(group_rows)])
@@ -98,7 +104,7 @@ def markdown(runs: list[dict], published: list[str]) -> str:
     lines = []
     for metric, title in (("success_rate", "Success rate (%)"),
                           ("mean_progress", "Progress (mean of each episode's best, %)")):
-        header, rows = table(runs, published, metric)
+        header, rows = table(runs, published, metric, with_chance=True)
         lines += [f"# {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         for r in rows:
             bold = str(r[0]).startswith("average")

@@ -11,6 +11,7 @@ import platform
 from pathlib import Path
 from typing import Any
 
+from rmbench.eval.chance import chance
 from rmbench.eval.report import PUBLISHED, table
 from rmbench.suite.plan import Plan, applies
 from rmbench.suite.runner import column
@@ -35,7 +36,8 @@ def results(plan: Plan, out: Path, command: str = "",
     for task, spec in plan.cells():
         cells.setdefault(task, {})[spec] = cell_row(plan, out, task, spec)
     collect = {t: read_json(Path(out) / t / TIMING, {}).get("collect_wall_s") for t in cells}
-    return {"command": command, "plan": plan.to_dict(), "cells": cells,
+    levels = {t: {"rate": chance(t).rate, "basis": chance(t).basis} for t in cells}
+    return {"command": command, "plan": plan.to_dict(), "cells": cells, "chance": levels,
             "failed": failed or {},
             "wall_s": {"table": read_json(Path(out) / TIMING, {}).get("table_wall_s"),
                        "collect": collect},
@@ -53,7 +55,7 @@ def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] 
     not evaluated yet, "n/a" where the column has no cell (no_key on an M(1) task)."""
     runs = [{"name": column(s), "summary": {"tasks": {t: row[s] for t, row in res["cells"].items()
                                                       if row.get(s)}}} for s in specs]
-    header, rows = table(runs, list(published), metric, list(res["cells"]))
+    header, rows = table(runs, list(published), metric, list(res["cells"]), with_chance=True)
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in rows:
         name = f"**{r[0]}**" if str(r[0]).startswith("average") else r[0]
@@ -82,7 +84,10 @@ def markdown(res: dict[str, Any]) -> str:
         lines += ["Published averages: " + "; ".join(
             f"{group}: " + ", ".join(f"{column(s)} {v}" for s, v in vals.items())
             for group, vals in PUBLISHED_ABLATIONS.items()) + ".", ""]
-    lines += ["## Progress (mean of each episode's best, %)", ""]
+    lines += ["Chance (no memory): the best success rate of a policy with every skill and no "
+              "memory, which guesses where only the past would tell (`eval/chance.py`):", ""]
+    lines += [f"- {t}: {100 * c['rate']:.1f}%, {c['basis']}" for t, c in res["chance"].items()]
+    lines += ["", "## Progress (mean of each episode's best, %)", ""]
     lines += _markdown_table(res, list(plan["policies"]), metric="mean_progress")
     wall = res["wall_s"]
     lines += ["", f"Wall time: {wall['table'] or 0:.0f} s for the table's runs "
