@@ -34,19 +34,21 @@ def test_one_guess_among_identical_places():
 
 
 def test_battery_flips_match_a_simulated_random_walk():
-    assert battery_flips(0) == 0.0
-    assert battery_flips(1) == pytest.approx(1 / 3)  # (1,0) or (0,1): one flip in two
+    assert battery_flips(100, (150, 150)) == 0.0  # no flip fits
+    assert battery_flips(150, (150, 150)) == pytest.approx(1 / 3)  # (1,0) or (0,1), one in two
+    assert battery_flips(600, (150, 150)) == pytest.approx(3 / 4)  # four flips
     rng = np.random.default_rng(0)
     pairs, hits, n = ((1, 0), (1, 1), (0, 1)), 0, 20000
     for _ in range(n):
-        correct, state = pairs[rng.integers(3)], [0, 0]
-        for _ in range(4):
-            state[rng.integers(2)] ^= 1
-            if tuple(state) == correct:
-                hits += 1
+        correct, state, left = pairs[rng.integers(3)], [0, 0], 674.0
+        while tuple(state) != correct:
+            k = rng.integers(2)
+            left -= (161.4, 116.5)[k]
+            if left < 0:
                 break
-    assert battery_flips(4) == pytest.approx(hits / n, abs=0.01)
-    assert chance("battery_try").rate == battery_flips(4) == 0.75
+            state[k] ^= 1
+        hits += tuple(state) == correct
+    assert chance("battery_try").rate == pytest.approx(hits / n, abs=0.01)
 
 
 def test_the_rows_parity_counts_for_blocks_ranking():

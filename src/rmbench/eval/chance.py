@@ -13,9 +13,10 @@ its tables, the posterior of each exact).
 
 Trial-and-error tasks allow as many tries as the step limit leaves after the expert's own
 durations: measured on 10 demonstrations per task (``rmbench collect TASK --episodes 10
---seed 0``, subtask segments), a flip in battery_try takes 116-192 steps after 326 for the two
-inserts (4 flips fit in 1000), a swap and its press in blocks_ranking_try 451-511 (7 fit in
-3500), a move in swap_blocks 149-191 before a press of 85 (5 moves fit in 1000).
+--seed 0``, subtask segments), battery_try's two inserts take 326 steps and a flip 161 (left)
+or 116 (right) on average (four to five flips fit in 1000), a swap and its press in
+blocks_ranking_try 451-511 (7 fit in 3500), a move in swap_blocks 149-191 before a press of
+85 (5 moves fit in 1000).
 """
 from __future__ import annotations
 
@@ -25,8 +26,9 @@ from functools import cache
 
 import numpy as np
 
-# tries the step limit leaves a perfect guesser (measured as the module docstring says)
-BATTERY_FLIPS = 4
+# what the step limit leaves a perfect guesser (measured as the module docstring says)
+BATTERY_INSERTS = 326  # steps to insert both cells
+BATTERY_FLIP_STEPS = (161.4, 116.5)  # mean steps of a left and of a right flip
 RANKING_SWAPS = 7
 SWAP_BLOCKS_MOVES = 5
 
@@ -86,10 +88,12 @@ def _swap_T() -> Chance:
 
 # ------------------------------------------------------------------------------- M(n)
 def _battery_try() -> Chance:
-    rate = battery_flips(BATTERY_FLIPS)
-    return Chance(rate, f"insert both positive first (as every demonstration does), then flip "
-                        f"the left or the right battery at random while the lamp stays off; "
-                        f"{BATTERY_FLIPS} flips fit")
+    from rmbench.tasks.battery_try import BatteryTry
+
+    rate = battery_flips(BatteryTry.step_limit - BATTERY_INSERTS)
+    return Chance(rate, "insert both positive first (as every demonstration does), then flip "
+                        "the left or the right battery at random while the lamp stays off; "
+                        "four to five flips fit")
 
 
 def _blocks_ranking_try() -> Chance:
@@ -150,26 +154,24 @@ def absorbed(step: np.ndarray, start: np.ndarray, good: np.ndarray, steps: int) 
     return total
 
 
-def battery_flips(flips: int) -> float:
+def battery_flips(budget: float, cost: tuple[float, float] = BATTERY_FLIP_STEPS) -> float:
     """battery_try: both cells go in positive first; after a failed try every view is the
     same, so each flip is of the left or the right cell with probability 1/2 (alike by
-    symmetry)."""
+    symmetry), and a flip counts if it ends within ``budget`` steps (``cost``: a left and a
+    right flip's steps)."""
+
+    def hit(state, correct, left):
+        if state == correct:
+            return 1.0
+        total = 0.0
+        for k in (0, 1):
+            if cost[k] <= left:
+                moved = tuple(b ^ (i == k) for i, b in enumerate(state))
+                total += 0.5 * hit(moved, correct, left - cost[k])
+        return total
+
     pairs = ((1, 0), (1, 1), (0, 1))
-    states = list(itertools.product((0, 1), repeat=2))
-    total = 0.0
-    for correct in pairs:
-        step = np.zeros((4, 4))
-        for i, s in enumerate(states):
-            if s == correct:
-                continue  # the lamp is on: the episode ends
-            for k in (0, 1):
-                t = list(s)
-                t[k] ^= 1
-                step[i, states.index(tuple(t))] += 0.5
-        start = np.eye(4)[states.index((0, 0))]
-        good = np.eye(4)[states.index(correct)]
-        total += absorbed(step, start, good, flips) / len(pairs)
-    return total
+    return sum(hit((0, 0), correct, budget) for correct in pairs) / len(pairs)
 
 
 def ranking_swaps(swaps: int) -> float:
