@@ -7,9 +7,9 @@ decide it chooses among what the demonstrations do at such a view, the same view
 same (possibly random) choice every time it comes back. It leaves no marks in the scene or in
 its own pose to remember by. Chance is the best success rate such a policy can reach, given
 the task's randomisation and its step limit: the level a memoryless baseline with every
-skill scores (``no_memory``, DP's two-step window, ACT's single step), and the ceiling it
-cannot pass. It is computed exactly, except for observe_and_pickup (a fixed-seed sample of
-its tables, the posterior of each exact).
+skill scores (``no_memory``, and near it DP's and ACT's windows of a step or two), and the
+ceiling a policy without memory cannot pass. It is computed exactly, except for
+observe_and_pickup (a fixed-seed sample of its tables, the posterior of each exact).
 
 Trial-and-error tasks allow as many tries as the step limit leaves after the expert's own
 durations: measured on 10 demonstrations per task (``rmbench collect TASK --episodes 10
@@ -18,6 +18,7 @@ or 116 (right) on average (four to five flips fit in 1000), a swap and its press
 blocks_ranking_try 451-511 (7 fit in 3500), a move in swap_blocks 149-191 before a press of
 85 (5 moves fit in 1000).
 """
+
 from __future__ import annotations
 
 import itertools
