@@ -175,16 +175,18 @@ def battery_flips(budget: float, cost: tuple[float, float] = BATTERY_FLIP_STEPS)
     return sum(hit((0, 0), correct, budget) for correct in pairs) / len(pairs)
 
 
+def swapped(order: tuple, pair: tuple[int, int]) -> tuple:
+    """``order`` with the entries at the two positions of ``pair`` exchanged."""
+    q = list(order)
+    q[pair[0]], q[pair[1]] = q[pair[1]], q[pair[0]]
+    return tuple(q)
+
+
 def ranking_swaps(swaps: int) -> float:
     """blocks_ranking_try: the target order is one of the five the row did not start in;
     after each failed press, swap one of the three pairs at random."""
     perms = list(itertools.permutations(range(3)))
     pairs = list(itertools.combinations(range(3), 2))
-
-    def swapped(p, pair):
-        q = list(p)
-        q[pair[0]], q[pair[1]] = q[pair[1]], q[pair[0]]
-        return tuple(q)
 
     total, cases = 0.0, 0
     for initial in perms:
@@ -212,11 +214,6 @@ def ranking_by_parity(swaps: int) -> float:
 
     def parity(p):
         return sum(p[i] > p[j] for i in range(3) for j in range(i + 1, 3)) % 2
-
-    def swapped(p, pair):
-        q = list(p)
-        q[pair[0]], q[pair[1]] = q[pair[1]], q[pair[0]]
-        return tuple(q)
 
     hits = 0
     for initial in perms:
