@@ -18,7 +18,10 @@ Failure: a cube off the table; a cube resting on another.
 
 Memory: TMC M(n). Aliasing point: between tries the row looks like any other wrong order with
 a red lamp; only the past tells how far along the swap sequence the robot is (the memory
-grows with the number of tries).
+grows with the number of tries). The sequence needs that memory, the task does not: the row's
+order shows its parity (which way its hues run round the colour wheel), and swapping left and
+middle on one parity, middle and right on the other visits all six orders in five swaps
+(``eval/chance.py``).
 """
 
 from __future__ import annotations
