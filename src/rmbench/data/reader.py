@@ -14,6 +14,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from rmbench.data import layout as L
+from rmbench.data.stats import from_json
 from rmbench.data.writer import DatasetError
 from rmbench.video import decode_video
 
@@ -128,6 +129,11 @@ class Dataset:
             table = table.select([c for c in table.column_names if not c.startswith("stats/")])
             rows.append({k: v[0] for k, v in table.to_pydict().items()})
         return rows
+
+    @cached_property
+    def stats(self) -> dict[str, dict[str, np.ndarray]]:
+        """meta/stats.json: per feature, its min, max, mean, std and count as arrays."""
+        return from_json(read_json(self.root / L.STATS))
 
     @cached_property
     def lengths(self) -> np.ndarray:

@@ -139,14 +139,17 @@ def choose(requested: str, ds) -> str:
     return choice
 
 
-def set_state_stats(encoder, stats: dict[str, dict[str, np.ndarray]], episodes) -> None:
-    """A state encoder's (``nn/state.py``) normalisers: the dataset's statistics of the
-    environment and joint states and, when it reads them, the grasp poses' over the training
-    examples' joint states (``episodes``, layout copies included)."""
-    encoder.set_stats(stats, L.ENV_STATE, L.STATE)
-    if encoder.poses is not None:
-        encoder.set_pose_stats(encoder.poses.from_joints(
-            np.concatenate([ep.state for ep in episodes])))
+def set_state_stats(encoders, stats: dict[str, dict[str, np.ndarray]], episodes) -> None:
+    """State encoders' (``nn/state.py``) normalisers: the dataset's statistics of the
+    environment and joint states and, for those that read them, the grasp poses' over the
+    training examples' joint states (``episodes``, layout copies included; solved once)."""
+    poses = None
+    for encoder in encoders:
+        encoder.set_stats(stats, L.ENV_STATE, L.STATE)
+        if encoder.poses is not None:
+            if poses is None:
+                poses = encoder.poses.from_joints(np.concatenate([ep.state for ep in episodes]))
+            encoder.set_pose_stats(poses)
 
 
 def state_noise_scale(cfg: ReadsObservation, state_names) -> torch.Tensor | None:

@@ -220,10 +220,7 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
     if cfg.layout_copies:
         describe["layout_copies_kept"] = add_layout_copies(frames, cfg, train_cfg.seed)
     if cfg.reads_state:
-        from rmbench.data.stats import from_json
-
-        stats = from_json(json.loads((ds.root / L.STATS).read_text()))
-        set_state_stats(model.encoders, stats, frames.low_dim)
+        set_state_stats((model.encoders,), ds.stats, frames.low_dim)
     trainer = trainer_cls(model, train_cfg.seed, tuple(ds.state_names or ()))
     frames = with_features(frames, ds, cfg)
 

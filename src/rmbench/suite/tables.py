@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +37,7 @@ def results(plan: Plan, out: Path, command: str = "",
     for task, spec in plan.cells():
         cells.setdefault(task, {})[spec] = cell_row(plan, out, task, spec)
     collect = {t: read_json(Path(out) / t / TIMING, {}).get("collect_wall_s") for t in cells}
-    levels = {t: {"rate": chance(t).rate, "basis": chance(t).basis} for t in cells}
+    levels = {t: asdict(chance(t)) for t in cells}
     return {"command": command, "plan": plan.to_dict(), "cells": cells, "chance": levels,
             "failed": failed or {},
             "wall_s": {"table": read_json(Path(out) / TIMING, {}).get("table_wall_s"),

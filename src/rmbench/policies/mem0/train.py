@@ -106,17 +106,18 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     examples = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
     if cfg.layout_copies:
         describe["layout_copies_kept"] = add_layout_copies(examples, cfg, train_cfg.seed)
-    stats = dataset_stats(ds)
+    stats = ds.stats
     if cfg.action_space == "ee":
         norm = to_pose_actions(examples, stats, cfg.horizon)
     else:
         norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
     model.executor.normalizer.load_state_dict(norm.state_dict())
     if cfg.reads_state:
-        env_states = np.concatenate([ep.environment_state for ep in examples.low_dim])
-        for encoder in (model.executor.encoders, model.planner.encoders):
-            set_state_stats(encoder, stats, examples.low_dim)
-            if cfg.reach_input:
+        encoders = (model.executor.encoders, model.planner.encoders)
+        set_state_stats(encoders, stats, examples.low_dim)
+        if cfg.reach_input:
+            env_states = np.concatenate([ep.environment_state for ep in examples.low_dim])
+            for encoder in encoders:
                 encoder.set_reach(ds.state_names, cfg.reach_input, env_states)
     out = Path(out)
     planner_report = None
@@ -190,12 +191,6 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
     planner.train()
     return {"decisions": len(examples), "steps": cfg.planner_steps,
             "train_accuracy": round(correct / len(examples), 4), "final_loss": round(loss_ema, 5)}
-
-
-def dataset_stats(ds: Dataset) -> dict[str, dict[str, np.ndarray]]:
-    from rmbench.data.stats import from_json
-
-    return from_json(json.loads((ds.root / L.STATS).read_text()))
 
 
 # (episode, frame indices, jitter generator or None) -> the planner's inputs at those frames

@@ -63,11 +63,7 @@ class Normalizer(nn.Module):
     def for_dataset(cls, ds, horizon: int, relative: bool) -> Normalizer:
         """From a dataset (``rmbench.data.reader.Dataset``): its meta/stats.json, and for
         relative actions the offsets' range measured over its episodes."""
-        import json
-
-        from rmbench.data.stats import from_json
-
-        stats = from_json(json.loads((ds.root / L.STATS).read_text()))
+        stats = ds.stats
         if not relative:
             return cls.from_stats(stats)
         low_dim = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
