@@ -1,19 +1,22 @@
 """Policy speed on CPU: closed-loop steps/s on one core for Mem-0, Diffusion Policy and ACT
 with the default camera set, Mem-0's planner latency, memory per step, and training steps/s
-(forward, backward and AdamW on a batch of 32) for each.
+(forward, backward and AdamW on a batch of 32, or --batch) for each.
 
     python benchmarks/policy_speed.py [--steps 300] [--train-steps 20] [--task press_button]
-    python benchmarks/policy_speed.py --case backbone [--steps 100] [--train-steps 10]
+    python benchmarks/policy_speed.py --case backbone [--steps 100] [--train-steps 10] \
+        [--batch 32] [--set FIELD=VALUE ...] [--out FILE]
 
 Models are the default configurations with random weights (speed does not depend on the
 weights). Observations are real renders of the task's station (three cameras at 320x240),
 resized by the policy as in evaluation. Training batches are built from the same renders.
 Prints a table and writes benchmarks/results/policy_speed.json.
 
-``--case backbone`` compares, on one thread, Mem-0's training steps/s at batch 32 with its
+``--case backbone`` compares, on one thread, Mem-0's training steps/s at the same batch with its
 CNNs (on frames, jittered) and with the frozen EfficientNet-Lite0 (on features as the cache
 holds them), the closed loop's step with the backbone in it (Mem-0, DP, ACT), and the cache's
 encoding rate, at strides 8, 16 and 32; it writes benchmarks/results/policy_speed_backbone.json.
+``--set`` changes Mem-0's config on both sides (e.g. the action head a recipe trains, which
+both share: the smaller it is, the more of a step the encoder is).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from rmbench.data.torch_dataset import resize
 from rmbench.policies.act.agent import ACTPolicy
 from rmbench.policies.act.config import ACTConfig
 from rmbench.policies.act.modeling import ACTModel, ACTTrainer
+from rmbench.policies.config import parse_overrides
 from rmbench.policies.dp.agent import DPPolicy
 from rmbench.policies.dp.config import DPConfig
 from rmbench.policies.dp.modeling import DiffusionPolicyModel, DPTrainer
@@ -72,23 +76,23 @@ def closed_loop(policy, frames, steps: int) -> dict:
             "rss_growth_mb": round(rss_mb() - rss0, 1)}
 
 
-def batch_from(frames, cfg, obs_steps: int, horizon: int) -> dict[str, torch.Tensor]:
-    """A training batch of BATCH items from the rendered frames, at the model's image size."""
+def batch_from(frames, cfg, obs_steps: int, horizon: int, size: int) -> dict[str, torch.Tensor]:
+    """A training batch of ``size`` items from the rendered frames, at the model's image size."""
     rng = np.random.default_rng(0)
     batch: dict[str, torch.Tensor] = {}
     window = (obs_steps,) if obs_steps > 1 else ()
     for cam in cfg.cameras:
         imgs = resize(np.stack([f["pixels"][cam] for f in frames]), tuple(cfg.image_size))
-        pick = rng.integers(len(frames), size=(BATCH, *window))
+        pick = rng.integers(len(frames), size=(size, *window))
         batch[L.image_key(cam)] = torch.from_numpy(imgs[pick]).movedim(-1, -3).contiguous()
     state = torch.from_numpy(np.stack([f["agent_pos"] for f in frames]).astype(np.float32))
-    batch[L.STATE] = state[rng.integers(len(frames), size=(BATCH, *window))]
-    batch[L.ACTION] = state[rng.integers(len(frames), size=(BATCH, horizon))]
-    batch["action_is_pad"] = torch.zeros(BATCH, horizon, dtype=torch.bool)
-    batch[L.SUBTASK_INDEX] = torch.zeros(BATCH, dtype=torch.long)
-    batch["text_index"] = torch.zeros(BATCH, dtype=torch.long)
-    batch["episode_start"] = torch.zeros(BATCH, dtype=torch.bool)
-    batch["end_label"] = torch.zeros(BATCH, dtype=torch.bool)
+    batch[L.STATE] = state[rng.integers(len(frames), size=(size, *window))]
+    batch[L.ACTION] = state[rng.integers(len(frames), size=(size, horizon))]
+    batch["action_is_pad"] = torch.zeros(size, horizon, dtype=torch.bool)
+    batch[L.SUBTASK_INDEX] = torch.zeros(size, dtype=torch.long)
+    batch["text_index"] = torch.zeros(size, dtype=torch.long)
+    batch["episode_start"] = torch.zeros(size, dtype=torch.bool)
+    batch["end_label"] = torch.zeros(size, dtype=torch.bool)
     return batch
 
 
@@ -140,15 +144,16 @@ def backbone_case(task, frames, args) -> dict:
     def mem0_trainer(cfg):
         torch.manual_seed(0)
         model = Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], None)
-        return Mem0Trainer(model, BATCH, decompose, 0)
+        return Mem0Trainer(model, args.batch, decompose, 0)
 
-    cnn = Mem0Config()
-    images = batch_from(frames, cnn, 1, cnn.horizon)
+    overrides = parse_overrides(Mem0Config, args.set)
+    cnn = Mem0Config(**overrides)
+    images = batch_from(frames, cnn, 1, cnn.horizon, args.batch)
     results: dict = {"cnn": {"mem0": train_speed(mem0_trainer(cnn), images, args.train_steps)}}
     results["cnn"]["mem0"].update(closed_loop(
         Mem0Policy.from_model(mem0_trainer(cnn).model, describe), frames, args.steps))
     for stride in STRIDES:
-        cfg = Mem0Config(backbone=EFFICIENTNET_LITE0, backbone_stride=stride)
+        cfg = Mem0Config(**overrides, backbone=EFFICIENTNET_LITE0, backbone_stride=stride)
         features = with_features(images, cfg)
         row = train_speed(mem0_trainer(cfg), features, args.train_steps)
         row["feature_shape"] = list(features[features_key("head")].shape[1:])
@@ -175,26 +180,33 @@ def backbone_case(task, frames, args) -> dict:
         for i in range(0, len(head), ENCODE_BATCH):
             backbone_features(cfg.backbone, stride, head[i:i + ENCODE_BATCH])
         row["encode_frames_per_s"] = round(len(head) / (time.perf_counter() - t0), 1)
-        results[f"stride{stride}"] = {"mem0": {"train_steps_per_s": row.pop("train_steps_per_s"),
+        speed = row.pop("train_steps_per_s")
+        results[f"stride{stride}"] = {"mem0": {"train_steps_per_s": speed,
+                                               "train_speedup": round(
+                                                   speed / results["cnn"]["mem0"]
+                                                   ["train_steps_per_s"], 1),
                                                "params": row.pop("mem0_params"),
                                                **row.pop("mem0")}, **row}
     result = {"task": task.name, "cameras": list(cnn.cameras), "image_size": list(cnn.image_size),
-              "threads": 1, "batch_size": BATCH, "steps": args.steps,
-              "train_steps": args.train_steps, "results": results}
-    print(f"one thread; Mem-0 with its CNNs: training at batch {BATCH} on frames "
+              "threads": 1, "batch_size": args.batch, "steps": args.steps,
+              "train_steps": args.train_steps, "set": args.set, "results": results}
+    print(f"one thread; Mem-0 with its CNNs: training at batch {args.batch} on frames "
           f"{results['cnn']['mem0']['train_steps_per_s']:.2f} steps/s, closed-loop step "
           f"{results['cnn']['mem0']['step_ms']:.1f} ms; with the frozen backbone:")
-    print(f"{'stride':<8}{'features':>14}{'train steps/s':>15}{'inputs':>10}{'Mem-0 step':>12}"
+    print(f"{'stride':<8}{'features':>14}{'train steps/s':>15}{'speedup':>9}{'inputs':>10}"
+          f"{'Mem-0 step':>12}"
           f"{'DP step':>10}{'ACT step':>10}{'encode':>14}")
     for stride in STRIDES:
         r = results[f"stride{stride}"]
         print(f"{stride:<8}{'x'.join(map(str, r['feature_shape'])):>14}"
-              f"{r['mem0']['train_steps_per_s']:>15.2f}{r['inputs_ms']:>7.1f} ms"
+              f"{r['mem0']['train_steps_per_s']:>15.2f}{r['mem0']['train_speedup']:>8.1f}x"
+              f"{r['inputs_ms']:>7.1f} ms"
               f"{r['mem0']['step_ms']:>9.1f} ms{r['dp']['step_ms']:>7.1f} ms"
               f"{r['act']['step_ms']:>7.1f} ms{r['encode_frames_per_s']:>8.0f} fr/s")
-    OUT_BACKBONE.parent.mkdir(parents=True, exist_ok=True)
-    OUT_BACKBONE.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {OUT_BACKBONE}")
+    out = args.out or OUT_BACKBONE
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {out}")
     return result
 
 
@@ -204,6 +216,11 @@ def main() -> None:
     ap.add_argument("--train-steps", type=int, default=20)
     ap.add_argument("--task", default="press_button")
     ap.add_argument("--case", choices=("all", "backbone"), default="all")
+    ap.add_argument("--batch", type=int, default=BATCH, help="training batch size")
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="--case backbone: a Mem-0 config field for both sides (VALUE as JSON)")
+    ap.add_argument("--out", type=Path, default=None,
+                    help=f"--case backbone: the JSON written (default {OUT_BACKBONE})")
     args = ap.parse_args()
     cores = len(os.sched_getaffinity(0))
     task = get_task(args.task)
@@ -258,19 +275,21 @@ def main() -> None:
     torch.set_num_threads(cores)
     torch.manual_seed(0)
     mem0_trainer = Mem0Trainer(Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"],
-                                         None), BATCH, task.tmc == "M(n)", 0)
-    results["mem0"].update(train_speed(mem0_trainer, batch_from(frames, cfg, 1, cfg.horizon),
+                                         None), args.batch, task.tmc == "M(n)", 0)
+    results["mem0"].update(train_speed(mem0_trainer, batch_from(frames, cfg, 1, cfg.horizon,
+                                                                  args.batch),
                                        args.train_steps))
     for name, (bcfg, model_cls, _, trainer_cls) in baselines.items():
         trainer = trainer_cls(model_cls(bcfg), 0)
         results[name].update(train_speed(trainer, batch_from(frames, bcfg, bcfg.obs_steps,
-                                                             bcfg.horizon), args.train_steps))
+                                                             bcfg.horizon, args.batch),
+                                         args.train_steps))
 
     result = {"task": task.name, "cameras": list(cfg.cameras), "image_size": list(cfg.image_size),
-              "inference_threads": 1, "training_threads": cores, "batch_size": BATCH,
+              "inference_threads": 1, "training_threads": cores, "batch_size": args.batch,
               "steps": args.steps, "train_steps": args.train_steps, "policies": results}
     print(f"{'policy':<8}{'params':>10}{'step (1 core)':>16}{'Hz':>8}{'RSS growth':>12}"
-          f"{f'train steps/s ({cores} cores, batch {BATCH})':>34}")
+          f"{f'train steps/s ({cores} cores, batch {args.batch})':>34}")
     for name, r in results.items():
         print(f"{name:<8}{r['params'] / 1e6:>9.2f}M{r['step_ms']:>13.1f} ms{r['hz']:>8.1f}"
               f"{r['rss_growth_mb']:>9.1f} MB{r['train_steps_per_s']:>34.2f}")
