@@ -2,7 +2,8 @@
 with the default camera set, Mem-0's planner latency, memory per step, and training steps/s
 (forward, backward and AdamW on a batch of 32, or --batch) for each.
 
-    python benchmarks/policy_speed.py [--steps 300] [--train-steps 20] [--task press_button]
+    python benchmarks/policy_speed.py [--steps 300] [--train-steps 20] [--task press_button] \
+        [--batch 32] [--out FILE]
     python benchmarks/policy_speed.py --case backbone [--steps 100] [--train-steps 10] \
         [--batch 32] [--set FIELD=VALUE ...] [--out FILE]
 
@@ -220,7 +221,7 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="--case backbone: a Mem-0 config field for both sides (VALUE as JSON)")
     ap.add_argument("--out", type=Path, default=None,
-                    help=f"--case backbone: the JSON written (default {OUT_BACKBONE})")
+                    help=f"the JSON written (default {OUT}, with --case backbone {OUT_BACKBONE})")
     args = ap.parse_args()
     cores = len(os.sched_getaffinity(0))
     task = get_task(args.task)
@@ -296,9 +297,10 @@ def main() -> None:
     print(f"Mem-0 planner call with 8 keys: {results['mem0']['planner_ms']:.1f} ms (target < 100); "
           f"memory store {results['mem0']['memory_store_floats']} floats (fixed size); "
           f"executor target >= 20 Hz")
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {OUT}")
+    out = args.out or OUT
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":
