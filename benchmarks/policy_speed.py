@@ -16,14 +16,14 @@ Prints a table and writes benchmarks/results/policy_speed.json.
 CNNs (on frames, jittered) and with the frozen EfficientNet-Lite0 (on features as the cache
 holds them), the closed loop's step with the backbone in it (Mem-0, DP, ACT), and the cache's
 encoding rate, at strides 8, 16 and 32; it writes benchmarks/results/policy_speed_backbone.json.
-``--set`` changes Mem-0's config on both sides (e.g. the action head a recipe trains, which
-both share: the smaller it is, the more of a step the encoder is).
+``--set FIELD=VALUE`` changes Mem-0's config in either case; here on both sides (e.g. the
+action head a recipe trains, which both share: the smaller it is, the more of a step the
+encoder is).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import resource
 import time
@@ -35,6 +35,7 @@ import torch
 import rmbench
 from rmbench.data import layout as L
 from rmbench.data.torch_dataset import resize
+from rmbench.data.writer import write_json
 from rmbench.policies.act.agent import ACTPolicy
 from rmbench.policies.act.config import ACTConfig
 from rmbench.policies.act.modeling import ACTModel, ACTTrainer
@@ -147,14 +148,13 @@ def backbone_case(task, frames, args) -> dict:
         model = Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], None)
         return Mem0Trainer(model, args.batch, decompose, 0)
 
-    overrides = parse_overrides(Mem0Config, args.set)
-    cnn = Mem0Config(**overrides)
+    cnn = Mem0Config(**args.mem0)
     images = batch_from(frames, cnn, 1, cnn.horizon, args.batch)
     results: dict = {"cnn": {"mem0": train_speed(mem0_trainer(cnn), images, args.train_steps)}}
     results["cnn"]["mem0"].update(closed_loop(
         Mem0Policy.from_model(mem0_trainer(cnn).model, describe), frames, args.steps))
     for stride in STRIDES:
-        cfg = Mem0Config(**overrides, backbone=EFFICIENTNET_LITE0, backbone_stride=stride)
+        cfg = Mem0Config(**args.mem0, backbone=EFFICIENTNET_LITE0, backbone_stride=stride)
         features = with_features(images, cfg)
         row = train_speed(mem0_trainer(cfg), features, args.train_steps)
         row["feature_shape"] = list(features[features_key("head")].shape[1:])
@@ -204,10 +204,8 @@ def backbone_case(task, frames, args) -> dict:
               f"{r['inputs_ms']:>7.1f} ms"
               f"{r['mem0']['step_ms']:>9.1f} ms{r['dp']['step_ms']:>7.1f} ms"
               f"{r['act']['step_ms']:>7.1f} ms{r['encode_frames_per_s']:>8.0f} fr/s")
-    out = args.out or OUT_BACKBONE
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {out}")
+    write_json(args.out or OUT_BACKBONE, result)
+    print(f"wrote {args.out or OUT_BACKBONE}")
     return result
 
 
@@ -219,10 +217,14 @@ def main() -> None:
     ap.add_argument("--case", choices=("all", "backbone"), default="all")
     ap.add_argument("--batch", type=int, default=BATCH, help="training batch size")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                    help="--case backbone: a Mem-0 config field for both sides (VALUE as JSON)")
+                    help="a Mem-0 config field (VALUE as JSON); with --case backbone on both sides")
     ap.add_argument("--out", type=Path, default=None,
                     help=f"the JSON written (default {OUT}, with --case backbone {OUT_BACKBONE})")
     args = ap.parse_args()
+    try:
+        args.mem0 = parse_overrides(Mem0Config, args.set)
+    except ValueError as err:
+        ap.error(str(err))
     cores = len(os.sched_getaffinity(0))
     task = get_task(args.task)
     env = rmbench.make(task.name, cameras=Mem0Config().cameras)
@@ -240,7 +242,7 @@ def main() -> None:
         return
 
     # --- Mem-0
-    cfg = Mem0Config()
+    cfg = Mem0Config(**args.mem0)
     describe = mem0_describe(task)
     torch.manual_seed(0)
     model = Mem0Model(cfg, describe["executor_texts"], describe["planner_texts"], None)
@@ -288,7 +290,8 @@ def main() -> None:
 
     result = {"task": task.name, "cameras": list(cfg.cameras), "image_size": list(cfg.image_size),
               "inference_threads": 1, "training_threads": cores, "batch_size": args.batch,
-              "steps": args.steps, "train_steps": args.train_steps, "policies": results}
+              "steps": args.steps, "train_steps": args.train_steps, "set": args.set,
+              "policies": results}
     print(f"{'policy':<8}{'params':>10}{'step (1 core)':>16}{'Hz':>8}{'RSS growth':>12}"
           f"{f'train steps/s ({cores} cores, batch {args.batch})':>34}")
     for name, r in results.items():
@@ -297,10 +300,8 @@ def main() -> None:
     print(f"Mem-0 planner call with 8 keys: {results['mem0']['planner_ms']:.1f} ms (target < 100); "
           f"memory store {results['mem0']['memory_store_floats']} floats (fixed size); "
           f"executor target >= 20 Hz")
-    out = args.out or OUT
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {out}")
+    write_json(args.out or OUT, result)
+    print(f"wrote {args.out or OUT}")
 
 
 if __name__ == "__main__":
