@@ -649,7 +649,7 @@ def test_layout_copies_train_on_demonstrations_moved_across_the_table(dataset, t
     grasp site's path with it (scaled down near the rest pose), turns the wrist with the
     reach direction rather than rolling the forearm, and keeps the grippers; training reads
     the copies beside the demonstrations."""
-    from rmbench.policies.layout_shift import REST_RADIUS, LayoutShift, xy_columns
+    from rmbench.data.layout_shift import REST_RADIUS, LayoutShift, xy_columns
     from rmbench.sim.kinematics import GraspKinematics
     from rmbench.sim.station import HOME_ARM
 

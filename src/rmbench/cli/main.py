@@ -7,6 +7,7 @@ import json
 import logging
 import sys
 
+from rmbench.cli import dataset
 from rmbench.suite.plan import add_recipe_arguments
 from rmbench.tasks.registry import UnknownTaskError
 
@@ -139,18 +140,6 @@ def cmd_collect(args) -> int:
               f"skipped; {summary.demos_per_min:.1f} demos/min")
         for s in summary.skipped:
             print(f"  skipped seed {s['seed']}: {s['reason']}")
-    return 0
-
-
-def cmd_dataset_check(args) -> int:
-    from rmbench.data.check import check_dataset
-
-    summary = check_dataset(args.dir)
-    if args.json:
-        print(json.dumps({"ok": True, **summary}, indent=2))
-    else:
-        print(f"ok: {summary['episodes']} episodes, {summary['frames']} frames of "
-              f"{summary['task']}, cameras {', '.join(summary['cameras'])}")
     return 0
 
 
@@ -388,12 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", type=int, default=8000)
     p.set_defaults(func=cmd_serve)
 
-    p = sub.add_parser("dataset", help="dataset tools")
-    dsub = p.add_subparsers(dest="dataset_command", required=True)
-    c = dsub.add_parser("check", help="validate every file of a dataset; report the first problem")
-    c.add_argument("dir")
-    _add_json(c)
-    c.set_defaults(func=cmd_dataset_check)
+    dataset.add_parser(sub, _add_json)
 
     p = sub.add_parser("quickstart", help="expert on every task for a few seeds, with videos")
     p.add_argument("--out", default="runs/quickstart", help="output folder")
@@ -408,7 +392,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
-    if getattr(args, "episodes", 1) < 1:
+    episodes = getattr(args, "episodes", None)
+    if episodes is not None and episodes < 1:
         print("rmbench: error: --episodes must be at least 1", file=sys.stderr)
         return 2
     try:

@@ -174,14 +174,14 @@ def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
 
 
 def dataset_seeds(path: str | Path, task: str) -> list[int]:
-    """The seeds a dataset of ``task`` was recorded on, in episode order (a one-line error for
-    a dataset of another task)."""
+    """The seeds a dataset of ``task`` was recorded on, in episode order, each once (a dataset
+    of layout copies holds each several times; a one-line error for another task's)."""
     from rmbench.data.reader import Dataset
 
     ds = Dataset(path)
     if ds.task != task:
         raise EvalError(f"{path} holds {ds.task} demonstrations, not {task}")
-    return [int(r["rmbench/seed"]) for r in ds.episodes]
+    return list(dict.fromkeys(int(r["rmbench/seed"]) for r in ds.episodes))
 
 
 def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],

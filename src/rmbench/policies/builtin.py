@@ -59,7 +59,11 @@ class ReplayPolicy(BasePolicy):
         task = type(env.unwrapped.task).name
         if self.ds.task != task:
             raise ValueError(f"replay dataset {root} holds {self.ds.task!r}, not {task!r}")
-        self.by_seed = {int(row["rmbench/seed"]): e for e, row in enumerate(self.ds.episodes)}
+        # The first episode of each seed: a dataset of layout copies holds each seed several
+        # times, the recorded episode first and then its copies (data/layout_copies.py).
+        self.by_seed: dict[int, int] = {}
+        for e, row in enumerate(self.ds.episodes):
+            self.by_seed.setdefault(int(row["rmbench/seed"]), e)
         self.seeds = list(self.by_seed)
         self._actions: np.ndarray | None = None
 

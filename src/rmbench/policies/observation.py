@@ -80,7 +80,7 @@ class ReadsObservation:
     layout_copies: int = 0
     """With observation "state": training also reads this many copies of each demonstration
     with its whole scene moved on the table by up to ``layout_shift`` metres in x and y, the
-    arms' joints solved for the moved grasp poses (``policies/layout_shift.py``): fifty
+    arms' joints solved for the moved grasp poses (``data/layout_shift.py``): fifty
     demonstrations are fifty layouts, and joint targets do not move with a layout."""
     layout_shift: float = 0.0
     """With ``layout_copies``: the largest shift (metres) along each table axis."""

@@ -28,13 +28,13 @@ import torch
 from torch import nn
 
 from rmbench.data import layout as L
+from rmbench.data.layout_shift import add_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config, save_checkpoint
 from rmbench.policies.config import PolicyConfig, parse_argument
 from rmbench.policies.feature_cache import features_key, with_features
-from rmbench.policies.layout_shift import add_layout_copies
 from rmbench.policies.nn.backbone import camera_encoders
 from rmbench.policies.nn.inference import inference
 from rmbench.policies.nn.normalize import Normalizer
@@ -218,7 +218,8 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
                          image_size=cfg.image_size, history=cfg.obs_steps,
                          environment_state=cfg.reads_state)
     if cfg.layout_copies:
-        describe["layout_copies_kept"] = add_layout_copies(frames, cfg, train_cfg.seed)
+        describe["layout_copies_kept"] = add_layout_copies(
+            frames, cfg.layout_copies, cfg.layout_shift, train_cfg.seed)
     if cfg.reads_state:
         set_state_stats((model.encoders,), ds.stats, frames.low_dim)
     trainer = trainer_cls(model, train_cfg.seed, tuple(ds.state_names or ()))

@@ -117,13 +117,15 @@ class Simulator:
             out[7 * k + 6] = (finger - robot.FINGER_CLOSED) / span
         return out
 
-    def ee_pose(self) -> np.ndarray:
+    def ee_pose(self, data: mujoco.MjData | None = None) -> np.ndarray:
         """End-effector poses (14,): per arm the point between the fingertips (x, y, z, world
-        frame) and the gripper orientation as a unit quaternion (w, x, y, z), w >= 0."""
+        frame) and the gripper orientation as a unit quaternion (w, x, y, z), w >= 0; of
+        ``data`` (another state of this model) if given."""
+        d = self.data if data is None else data
         out = np.empty(EE_POSE_DIM)
         for k, sid in enumerate(self.grasp_sites):
-            quat = mat_to_quat(self.data.site_xmat[sid].reshape(3, 3))
-            out[7 * k: 7 * k + 3] = self.data.site_xpos[sid]
+            quat = mat_to_quat(d.site_xmat[sid].reshape(3, 3))
+            out[7 * k: 7 * k + 3] = d.site_xpos[sid]
             out[7 * k + 3: 7 * k + 7] = quat if quat[0] >= 0 else -quat
         return out
 

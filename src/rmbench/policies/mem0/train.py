@@ -16,12 +16,12 @@ import numpy as np
 import torch
 
 from rmbench.data import layout as L
+from rmbench.data.layout_shift import add_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
 from rmbench.policies.action_space import EE_DIM, EEActions
 from rmbench.policies.checkpoint import save_checkpoint
 from rmbench.policies.feature_cache import FeatureCache, with_features
-from rmbench.policies.layout_shift import add_layout_copies
 from rmbench.policies.mem0.classifier import end_labels
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
@@ -105,7 +105,8 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     model = build_model(cfg, describe, vectors)
     examples = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
     if cfg.layout_copies:
-        describe["layout_copies_kept"] = add_layout_copies(examples, cfg, train_cfg.seed)
+        describe["layout_copies_kept"] = add_layout_copies(
+            examples, cfg.layout_copies, cfg.layout_shift, train_cfg.seed)
     stats = ds.stats
     if cfg.action_space == "ee":
         norm = to_pose_actions(examples, stats, cfg.horizon)

@@ -103,11 +103,10 @@ def shifted_copies(episodes: list[Episode], state_names, copies: int, reach: flo
     return out
 
 
-def add_layout_copies(examples, cfg, seed: int) -> int:
-    """Append ``cfg.layout_copies`` shifted copies (up to ``cfg.layout_shift``) of each
-    demonstration to ``examples`` (a ``DemoDataset`` read without cameras); how many were
-    kept."""
+def add_layout_copies(examples, copies: int, reach: float, seed: int) -> int:
+    """Append ``copies`` shifted copies (up to ``reach`` metres) of each demonstration to
+    ``examples`` (a ``DemoDataset`` read without cameras); how many were kept."""
     before = len(examples.low_dim)
-    examples.add_episodes(shifted_copies(examples.low_dim, examples.ds.state_names,
-                                         cfg.layout_copies, cfg.layout_shift, seed))
+    examples.add_episodes(shifted_copies(examples.low_dim, examples.ds.state_names, copies,
+                                         reach, seed))
     return len(examples.low_dim) - before

@@ -1,0 +1,154 @@
+"""Rendered layout copies: the source comes back unchanged, copies move the scene, resume, errors."""
+
+import json
+import shutil
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from rmbench.cli.main import main
+from rmbench.data import DatasetError, collect, writer
+from rmbench.data import layout as L
+from rmbench.data.check import check_dataset
+from rmbench.data.layout_copies import COPY_KEY, copy_layouts, shifts
+from rmbench.data.layout_shift import LayoutShift, xy_columns
+from rmbench.data.reader import Dataset
+from rmbench.envs.noise import NoiseSpec
+from rmbench.envs.registration import make
+from rmbench.eval.harness import dataset_seeds
+from rmbench.policies.builtin import ReplayPolicy
+from tests.conftest import DATA_TASK as TASK
+from tests.conftest import small_collection
+
+COPIES, REACH = 2, 0.02
+
+
+@pytest.fixture(scope="module")
+def noisy(tmp_path_factory):
+    """Two demonstrations recorded with action noise: the replay must re-draw it."""
+    out = tmp_path_factory.mktemp("data") / "noisy"
+    collect(small_collection(out, episodes=2, noise=NoiseSpec("white", 0.02)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def copied(noisy, tmp_path_factory):
+    out = tmp_path_factory.mktemp("data") / "copies"
+    summary = copy_layouts(noisy, out, COPIES, REACH, progress=False)
+    return out, summary
+
+
+def contents(root):
+    ds = Dataset(root)
+    return ([pq.read_table(root / L.data_file(e)).to_pydict() for e in range(ds.num_episodes)],
+            ds.episodes, [ds.video_path(c, e).read_bytes() for e in range(ds.num_episodes)
+                          for c in ds.cameras])
+
+
+def test_each_demonstration_comes_back_unchanged_before_its_copies(noisy, copied):
+    out, summary = copied
+    src, dst = Dataset(noisy), Dataset(out)
+    assert summary.out_of_reach == 0 and dst.num_episodes == 2 * (COPIES + 1)
+    check_dataset(out)
+    for e in range(src.num_episodes):
+        d = e * (COPIES + 1)
+        a, b = src.episode(e), dst.episode(d)
+        assert b.hidden[COPY_KEY] == {"episode": e, "copy": 0, "shift": [0.0, 0.0]}
+        for field in ("state", "action", "ee_pose", "environment_state", "progress",
+                      "subtask_index", "subtask_end"):
+            np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+        for cam in src.cameras:  # the replay's frames are the recording's, bit for bit
+            assert src.video_path(cam, e).read_bytes() == dst.video_path(cam, d).read_bytes()
+
+
+def test_a_copy_moves_every_position_and_the_arms_with_the_scene(noisy, copied):
+    out, _ = copied
+    src, dst = Dataset(noisy), Dataset(out)
+    source = src.episode(1)
+    xs, ys = xy_columns(src.state_names)
+    for k in range(1, COPIES + 1):
+        copy = dst.episode(COPIES + 1 + k)
+        delta = shifts(0, 1, COPIES, REACH)[k]
+        assert copy.hidden[COPY_KEY]["shift"] == pytest.approx(delta, abs=1e-6)
+        assert copy.seed == source.seed and copy.instruction == source.instruction
+        moved = copy.environment_state - source.environment_state
+        np.testing.assert_allclose(moved[:, xs], delta[0], atol=1e-6)
+        np.testing.assert_allclose(moved[:, ys], delta[1], atol=1e-6)
+        rest = np.setdiff1d(np.arange(moved.shape[1]), np.concatenate([xs, ys]))
+        np.testing.assert_array_equal(moved[:, rest], 0.0)
+        expect = LayoutShift(src.state_names).shift(source, delta)
+        np.testing.assert_array_equal(copy.state, expect.state)
+        np.testing.assert_array_equal(copy.action, expect.action)
+        # The grasp poses read from the drawn scene follow the shift where an arm works (at
+        # rest it stays: its pose does not move with the scene).
+        follows = [np.abs(copy.ee_pose[:, a:a + 2] - source.ee_pose[:, a:a + 2] - delta)
+                   .max(1) < 2e-3 for a in (0, 7)]
+        assert (follows[0] | follows[1]).mean() > 0.5
+        for cam in dst.cameras:  # and the cameras see another scene
+            assert not np.array_equal(copy.frames[cam], source.frames[cam])
+
+
+def test_evaluation_reads_the_recorded_episodes_of_a_copies_dataset(noisy, copied):
+    out, _ = copied
+    assert dataset_seeds(out, TASK) == dataset_seeds(noisy, TASK)  # each layout once
+    env = make(TASK)
+    try:
+        replay = ReplayPolicy(str(out), env)
+    finally:
+        env.close()
+    assert list(replay.by_seed.values()) == [0, COPIES + 1]  # copy 0: what replays
+
+
+def test_same_dataset_whatever_the_worker_count(noisy, copied, tmp_path):
+    out = tmp_path / "copies"
+    assert main(["dataset", "copy-layouts", str(noisy), "--out", str(out), "--copies",
+                 str(COPIES), "--reach", str(REACH), "--workers", "2", "--json"]) == 0
+    assert contents(out) == contents(copied[0])
+
+
+def test_an_interrupted_run_resumes_to_the_same_dataset(noisy, copied, tmp_path, monkeypatch):
+    out = tmp_path / "copies"
+    real, commits = writer.write_parquet, []
+
+    def die_on_fourth_commit(path, table):
+        if "episodes" in path.parts:
+            commits.append(path)
+            if len(commits) == 4:
+                raise KeyboardInterrupt  # killed inside the second demonstration's copies
+        real(path, table)
+
+    monkeypatch.setattr(writer, "write_parquet", die_on_fourth_commit)
+    with pytest.raises(KeyboardInterrupt):
+        copy_layouts(noisy, out, COPIES, REACH, progress=False)
+    monkeypatch.setattr(writer, "write_parquet", real)
+    assert Dataset(out).num_episodes == 3
+    summary = copy_layouts(noisy, out, COPIES, REACH, progress=False)
+    assert summary.new_episodes == 3
+    assert contents(out) == contents(copied[0])
+
+
+def test_bad_input_is_a_one_line_error(dataset, noisy, copied, tmp_path, capsys):
+    with pytest.raises(DatasetError, match="other arguments"):
+        copy_layouts(noisy, copied[0], COPIES + 1, REACH, progress=False)
+    with pytest.raises(ValueError, match="copies must be >= 0"):
+        copy_layouts(noisy, tmp_path / "a", COPIES, float("nan"), progress=False)
+    assert main(["dataset", "copy-layouts", str(noisy), "--out", str(tmp_path / "b"),
+                 "--episodes", "3"]) == 2
+    assert "episodes must be in 1..2" in capsys.readouterr().err
+    assert main(["dataset", "copy-layouts", str(tmp_path / "none"), "--out",
+                 str(tmp_path / "c")]) == 2
+    assert "no such dataset folder" in capsys.readouterr().err
+    # A recording that no longer replays (its actions edited) is refused, not copied.
+    broken = tmp_path / "broken"
+    shutil.copytree(dataset, broken)
+    table = pq.read_table(broken / L.data_file(0))
+    actions = np.stack(table.column(L.ACTION).to_numpy(zero_copy_only=False)).astype(np.float32)
+    actions[5:, 0] += 0.05
+    table = table.set_column(table.column_names.index(L.ACTION), L.ACTION,
+                             writer.vector_column(actions))
+    pq.write_table(table, broken / L.data_file(0))
+    with pytest.raises(DatasetError, match="replay differs"):
+        copy_layouts(broken, tmp_path / "d", 1, REACH, episodes=1, progress=False)
+    meta = json.loads((tmp_path / "d" / L.RMBENCH).read_text())
+    assert meta["episodes"] == 0  # nothing of the broken episode was committed
