@@ -211,12 +211,13 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
                          f"train with --set 'cameras={json.dumps(list(ds.cameras))}'")
     torch.manual_seed(train_cfg.seed)
     model = model_cls(cfg, len(ds.state_names or ()) if cfg.reads_state else 0)
-    norm = Normalizer.for_dataset(ds, cfg.horizon, cfg.relative_actions)
-    model.normalizer.load_state_dict(norm.state_dict())
     frames = DemoDataset(ds, chunk=cfg.horizon,
                          cameras=[] if cfg.reads_state or cfg.reads_features else list(cfg.cameras),
                          image_size=cfg.image_size, history=cfg.obs_steps,
                          environment_state=cfg.reads_state)
+    norm = Normalizer.for_demonstrations(ds.stats, frames.low_dim, cfg.horizon,
+                                         cfg.relative_actions)
+    model.normalizer.load_state_dict(norm.state_dict())
     if cfg.layout_copies:
         describe["layout_copies_kept"] = add_layout_copies(
             frames, cfg.layout_copies, cfg.layout_shift, train_cfg.seed)

@@ -60,15 +60,14 @@ class Normalizer(nn.Module):
         return norm
 
     @classmethod
-    def for_dataset(cls, ds, horizon: int, relative: bool) -> Normalizer:
-        """From a dataset (``rmbench.data.reader.Dataset``): its meta/stats.json, and for
-        relative actions the offsets' range measured over its episodes."""
-        stats = ds.stats
+    def for_demonstrations(cls, stats, episodes, horizon: int, relative: bool) -> Normalizer:
+        """From a dataset's meta/stats.json (``stats``), and for relative actions the offsets'
+        range measured over its ``episodes`` (``rmbench.data.reader.Episode``, already read
+        by the caller's training examples)."""
         if not relative:
             return cls.from_stats(stats)
-        low_dim = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
-        return cls.from_episodes(stats, [ep.state for ep in low_dim], [ep.action for ep in low_dim],
-                                 horizon)
+        return cls.from_episodes(stats, [ep.state for ep in episodes],
+                                 [ep.action for ep in episodes], horizon)
 
     def _set_state(self, stats) -> None:
         with torch.no_grad():
