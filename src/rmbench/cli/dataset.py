@@ -1,8 +1,43 @@
-"""``rmbench dataset ...``: checking a dataset and deriving one from it."""
+"""``rmbench collect`` and ``rmbench dataset ...``: recording, checking and deriving datasets."""
 
 from __future__ import annotations
 
+import argparse
 import json
+
+from rmbench.cli.common import add_json
+
+
+def _resolution(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"resolution must look like 320x240, got {text!r}") from None
+    return w, h
+
+
+def cmd_collect(args) -> int:
+    from rmbench.data import CollectConfig, collect
+
+    width, height = args.resolution
+    kwargs = {"cameras": tuple(args.cameras)} if args.cameras else {}
+    from rmbench.envs.noise import NoiseSpec
+
+    cfg = CollectConfig(args.task, args.out, episodes=args.episodes, seed=args.seed,
+                        width=width, height=height, workers=args.workers, search=args.search,
+                        backend=args.backend, overwrite=args.overwrite,
+                        progress=not args.json,
+                        noise=NoiseSpec(args.noise_kind, args.noise, args.noise_tau), **kwargs)
+    summary = collect(cfg)
+    if args.json:
+        print(json.dumps(summary.to_dict(), indent=2))
+    else:
+        print(f"{summary.task}: {summary.episodes} episodes ({summary.new_episodes} new, "
+              f"{summary.frames} frames) in {summary.root}; {len(summary.skipped)} seed(s) "
+              f"skipped; {summary.demos_per_min:.1f} demos/min")
+        for s in summary.skipped:
+            print(f"  skipped seed {s['seed']}: {s['reason']}")
+    return 0
 
 
 def cmd_check(args) -> int:
@@ -32,7 +67,32 @@ def cmd_copy_layouts(args) -> int:
     return 0
 
 
-def add_parser(sub, add_json) -> None:
+def add_parsers(sub) -> None:
+    p = sub.add_parser("collect", help="record expert demonstrations into a LeRobot v3.0 dataset")
+    p.add_argument("task", help="task name or gym id (see `rmbench tasks`)")
+    p.add_argument("--episodes", type=int, default=50, help="demonstrations wanted in all")
+    p.add_argument("--seed", type=int, default=0, help="first candidate seed, in [0, 100000) "
+                   "(evaluation uses 100000 and up)")
+    p.add_argument("--out", required=True, help="dataset folder (resumed if it exists)")
+    p.add_argument("--workers", type=int, default=1, help="local worker processes")
+    p.add_argument("--cameras", nargs="+", metavar="CAM",
+                   help="cameras to record (default: head left_wrist right_wrist)")
+    p.add_argument("--resolution", type=_resolution, default=(320, 240), metavar="WxH")
+    p.add_argument("--search", choices=["search", "direct"], default="search",
+                   help="search: solve each seed without rendering, then record a replay; "
+                   "direct: record while solving, drop failures")
+    p.add_argument("--backend", choices=["local", "ray"], default="local",
+                   help="ray: spread episodes over a Ray cluster (pip install 'rmbench[ray]')")
+    p.add_argument("--overwrite", action="store_true", help="delete the dataset in --out first")
+    p.add_argument("--noise", type=float, default=0.0, metavar="SIGMA",
+                   help="DART: execute the expert's action plus noise of this std (radians, arm "
+                   "joints) and record the expert's action (default 0: clean demonstrations)")
+    p.add_argument("--noise-kind", choices=("white", "smooth", "offset"), default="white",
+                   help="see `rmbench robustness --help`")
+    p.add_argument("--noise-tau", type=float, default=0.5, help="smooth noise time constant (s)")
+    add_json(p)
+    p.set_defaults(func=cmd_collect)
+
     p = sub.add_parser("dataset", help="dataset tools")
     dsub = p.add_subparsers(dest="dataset_command", required=True)
     c = dsub.add_parser("check", help="validate every file of a dataset; report the first problem")

@@ -3,17 +3,21 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from typing import Any
 
-from rmbench.policies.config import parse_overrides
-from rmbench.policies.trainable import trainable
-from rmbench.training.loop import TrainConfig
+from rmbench.cli.common import add_json
 
 
 def run_training(policy: str, dataset: str, out: str, *, steps: int, batch_size: int, device: str,
                  seed: int, save_every: int, ablations: list[str], overrides: list[str],
                  workers: int = 0, progress: bool = True) -> dict[str, Any]:
+    # Imported here: torch takes seconds to import, and only training needs it.
+    from rmbench.policies.config import parse_overrides
+    from rmbench.policies.trainable import trainable
+    from rmbench.training.loop import TrainConfig
+
     train_cfg = TrainConfig(steps=steps, batch_size=batch_size, device=device, seed=seed,
                             save_every=save_every)
     config_cls, fit = trainable(policy)
@@ -31,3 +35,35 @@ def run_training(policy: str, dataset: str, out: str, *, steps: int, batch_size:
     if ablations:
         cfg = replace(cfg, ablations=tuple(ablations))
     return fit(dataset, out, cfg, train_cfg, progress=progress, workers=workers)
+
+
+def cmd_train(args) -> int:
+    result = run_training(args.policy, args.dataset, args.out, steps=args.steps,
+                          batch_size=args.batch_size, device=args.device, seed=args.seed,
+                          save_every=args.save_every, ablations=args.ablation or [],
+                          overrides=args.set or [], workers=args.workers, progress=not args.json)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(f"trained {args.policy} for {result['steps']} steps "
+              f"(resumed from {result['resumed_from']}); checkpoint in {args.out}")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    p = sub.add_parser("train", help="train a learned policy on a dataset (resumes in --out)")
+    p.add_argument("policy", choices=["mem0", "dp", "act"], help="which policy")
+    p.add_argument("--dataset", required=True, help="an rmbench dataset folder")
+    p.add_argument("--out", required=True, help="checkpoint folder (resumed if it exists)")
+    p.add_argument("--steps", type=int, default=3000)
+    p.add_argument("--batch-size", type=int, default=32)
+    p.add_argument("--device", default="cpu", help="cpu | cuda")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--save-every", type=int, default=500)
+    p.add_argument("--ablation", action="append",
+                   help="Mem-0 only: no_anchor | no_sliding | no_memory | no_key (repeatable)")
+    p.add_argument("--set", action="append", metavar="FIELD=VALUE",
+                   help="override a config field, VALUE as JSON (e.g. --set dim=64)")
+    p.add_argument("--workers", type=int, default=0, help="data-loading processes")
+    add_json(p)
+    p.set_defaults(func=cmd_train)

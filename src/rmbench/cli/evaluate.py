@@ -1,0 +1,153 @@
+"""``rmbench eval``, ``open-loop``, ``report``, ``table`` and ``serve``: policies measured."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from rmbench.cli.common import add_json
+from rmbench.suite.plan import add_recipe_arguments
+
+
+def cmd_eval(args) -> int:
+    from rmbench.eval import EvalConfig, evaluate
+    from rmbench.tasks.registry import ordered
+
+    tasks = [c.name for c in ordered()] if args.all else (args.task or [])
+    if not tasks:
+        raise ValueError("name a task with --task, or --all")
+    cfg = EvalConfig(tuple(tasks), args.policy, args.out, episodes=args.episodes, seed=args.seed,
+                     workers=args.workers, backend=args.backend, video=args.video,
+                     instructions=args.instructions, progress=not args.json,
+                     seeds_of=args.seeds_of)
+    summary = evaluate(cfg)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        for task, r in summary["tasks"].items():
+            print(f"{task:<20} {r['tmc']:<5} success {r['successes']:>3}/{r['episodes']:<3} "
+                  f"({100 * r['success_rate']:5.1f}%)  progress {r['mean_progress']:.3f}")
+        print(f"records and summary in {args.out}")
+    return 0
+
+
+def cmd_open_loop(args) -> int:
+    from rmbench.eval.open_loop import open_loop_error
+
+    result = open_loop_error(args.policy, args.dataset, args.indices)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"{'episode':>7} {'seed':>6} {'frames':>6} {'policy':>8} {'hold':>8}")
+    for r in result["episodes"]:
+        print(f"{r['episode']:>7} {r['seed']:>6} {r['frames']:>6} {r['error']:>8.4f} "
+              f"{r['hold_error']:>8.4f}")
+    print(f"{'all':>7} {'':>6} {'':>6} {result['error']:>8.4f} {result['hold_error']:>8.4f}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from rmbench.eval.report import write_report
+
+    out = write_report(args.dirs, args.out, args.published or [], args.labels)
+    print(f"wrote {out}")
+    return 0
+
+
+def cmd_table(args) -> int:
+    import shlex
+    from pathlib import Path
+
+    from rmbench.suite import runner, tables
+    from rmbench.suite.plan import ALL_POLICIES, Plan
+    from rmbench.tasks.registry import ordered
+
+    tasks = ([t.name for t in ordered()] if args.tasks == "all"
+             else [t.strip() for t in args.tasks.split(",") if t.strip()])
+    policies = [p.strip() for p in (args.policies or ",".join(ALL_POLICIES)).split(",") if p.strip()]
+    plan = Plan(args.obs, tuple(tasks), tuple(policies), demos=args.demos, steps=args.steps,
+                batch=args.batch, episodes=args.episodes, noise=args.noise,
+                noise_kind=args.noise_kind, sets=tuple(args.set), video=args.video)
+    out = Path(args.out or f"runs/table_{args.obs}")
+    failed = runner.run(plan, out, jobs=args.jobs, backend=args.backend)
+    command = "rmbench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    tables.write(plan, out, command, {job.name: err for job, err in failed.items()})
+    print((out / "table.md").read_text())
+    print(f"wrote {out / 'table.md'} and {out / 'table.json'}")
+    if failed:
+        print(f"rmbench: {len(failed)} job(s) failed (logs in {out / 'logs'}); a re-run "
+              f"resumes what is missing", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_serve(args) -> int:
+    from rmbench.serve.server import PolicyServer
+    from rmbench.tasks import get_task
+
+    PolicyServer(args.policy, get_task(args.task).name, args.host, args.port).serve_forever()
+    return 0
+
+
+def add_parsers(sub) -> None:
+    p = sub.add_parser("eval", help="evaluate a policy on expert-verified seeds")
+    p.add_argument("--task", action="append", help="task name or gym id (repeatable)")
+    p.add_argument("--all", action="store_true", help="every task")
+    p.add_argument("--policy", required=True,
+                   help="expert | random | noop | replay:DATASET | remote:ws://HOST:PORT | ...")
+    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--seed", type=int, default=0,
+                   help="evaluation seed s: episodes from 100000 * (1 + s) up")
+    p.add_argument("--seeds-of", metavar="DATASET",
+                   help="run the seeds DATASET's demonstrations were recorded on instead (the "
+                        "layouts a policy trained on: its score there against --seed's held-out "
+                        "layouts is what it memorised)")
+    p.add_argument("--out", required=True, help="results folder (resumed if it exists)")
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--backend", choices=["local", "ray"], default="local")
+    p.add_argument("--video", default="first:1", help="first:K | failures | none")
+    p.add_argument("--instructions", choices=["seen", "unseen"], default="seen")
+    add_json(p)
+    p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("open-loop", help="a policy's action error on recorded demonstrations, "
+                                         "fed the recorded observations, beside holding still")
+    p.add_argument("--policy", required=True, help="policy spec, e.g. mem0:CKPT")
+    p.add_argument("--dataset", required=True, help="an rmbench dataset folder")
+    p.add_argument("--episodes", type=int, nargs="+", default=[0, 1], metavar="E",
+                   dest="indices", help="episode indices (default: 0 1)")
+    add_json(p)
+    p.set_defaults(func=cmd_open_loop)
+
+    p = sub.add_parser("report", help="tasks x policies table from evaluation folders")
+    p.add_argument("dirs", nargs="+", metavar="DIR", help="rmbench eval output folders")
+    p.add_argument("--out", default="report.md", help="report.md or report.html")
+    p.add_argument("--published", nargs="*", metavar="POLICY",
+                   help="add published success rates: DP ACT Pi0.5 X-VLA Mem-0")
+    p.add_argument("--labels", nargs="+", metavar="NAME",
+                   help="column names, one per DIR in order (default: the policy spec)")
+    p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("table", help="the benchmark's tables in one resumable command: collect, "
+                       "train every policy and ablation, evaluate, report")
+    p.add_argument("--obs", choices=("state", "pixels"), required=True)
+    p.add_argument("--tasks", default="all", help="comma-separated task names, or all")
+    p.add_argument("--policies", default=None,
+                   help="comma-separated: mem0, mem0:ABLATION (no_anchor, no_sliding, "
+                        "no_memory, no_key, gt_classifier), dp, act (default: all of them; "
+                        "no_key and gt_classifier on M(n) tasks only)")
+    add_recipe_arguments(p)
+    p.add_argument("--video", default="none", help="evaluation videos: first:K, failures, none")
+    p.add_argument("--out", default=None, help="the table's folder (default runs/table_<obs>)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="jobs at once (local: each a process with cores/jobs torch threads)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="ray: jobs on a Ray cluster (RAY_ADDRESS); --out on a shared file system")
+    p.set_defaults(func=cmd_table)
+
+    p = sub.add_parser("serve", help="serve a policy over a websocket (msgpack-numpy)")
+    p.add_argument("--policy", required=True, help="policy spec, e.g. random or replay:DATASET")
+    p.add_argument("--task", required=True, help="the task the policy acts in")
+    p.add_argument("--host", default="127.0.0.1", help="bind address (default: this machine only)")
+    p.add_argument("--port", type=int, default=8000)
+    p.set_defaults(func=cmd_serve)
