@@ -190,7 +190,7 @@ def test_the_graph_is_read():
     assert "rmbench.policies.mem0.agent" in graph and "rmbench.cli.main" in graph
     assert "rmbench.data.layout" in graph["rmbench.policies.mem0.train"]  # from pkg import sub
     assert "rmbench.data" in graph["rmbench.policies.mem0.train"]  # the package it runs first
-    assert "rmbench.eval" in graph["rmbench.cli.main"]  # an import inside a function
+    assert "rmbench.eval" in graph["rmbench.cli.evaluate"]  # an import inside a function
     assert "rmbench.sim" in graph[ROOT]  # from rmbench import sim
 
 

@@ -57,7 +57,8 @@ def cmd_copy_layouts(args) -> int:
 
     summary = copy_layouts(args.source, args.out, args.copies, args.reach, seed=args.seed,
                            episodes=args.episodes, overwrite=args.overwrite,
-                           workers=args.workers, progress=not args.json)
+                           workers=args.workers, backend=args.backend,
+                           progress=not args.json)
     if args.json:
         print(json.dumps(summary.to_dict(), indent=2))
     else:
@@ -113,6 +114,8 @@ def add_parsers(sub) -> None:
                    help="copy the first N demonstrations (default: all)")
     c.add_argument("--workers", type=int, default=1,
                    help="processes copying demonstrations (the dataset does not depend on it)")
+    c.add_argument("--backend", choices=["local", "ray"], default="local",
+                   help="ray: spread demonstrations over a Ray cluster")
     c.add_argument("--overwrite", action="store_true", help="start over if --out exists")
     add_json(c)
     c.set_defaults(func=cmd_copy_layouts)

@@ -81,14 +81,16 @@ class SceneShift:
     def __init__(self, env):
         self.sim, self.task = env.unwrapped.sim, env.unwrapped.task
         self.data = mujoco.MjData(self.sim.model)
-        free = [p for p in self.task.pieces if isinstance(p, FreePiece)]
         other = [p for p in self.task.pieces if not isinstance(p, FreePiece | StaticPiece)]
         if other:
             raise DatasetError(f"{self.task.name}: layout copies move free and fixed pieces; "
                                f"{type(other[0]).__name__} is neither")
-        self.free_xy = np.array([(p.qpos_adr, p.qpos_adr + 1) for p in free], np.int64)
-        self.bodies = np.array([p.body_id for p in self.task.pieces
-                                if isinstance(p, StaticPiece)], np.int64)
+        # A piece with a free joint moves through it; every other one (fixtures, and fixed
+        # display copies such as observe_and_pickup's reference) through its body's position.
+        free = [p for p in self.task.pieces if isinstance(p, FreePiece) and p.qpos_adr >= 0]
+        self.free_xy = np.array([(p.qpos_adr, p.qpos_adr + 1) for p in free],
+                                np.int64).reshape(-1, 2)
+        self.bodies = np.array([p.body_id for p in self.task.pieces if p not in free], np.int64)
 
     def render(self, renderer: mujoco.Renderer, cameras, joints: np.ndarray,
                delta: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -196,6 +198,10 @@ def copy_layouts(source: str | Path, out: str | Path, copies: int, reach: float,
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
     src = Dataset(source)
+    if L.root_path(out).resolve() == src.root.resolve():
+        raise DatasetError(f"--out {out} is the source dataset; write the copies elsewhere")
+    if not src.num_episodes:
+        raise DatasetError(f"{src.root} holds no episodes")
     if src.state_names is None:
         raise DatasetError(f"{src.root} records no {L.ENV_STATE}: layout copies move it")
     if not src.cameras:
@@ -205,10 +211,13 @@ def copy_layouts(source: str | Path, out: str | Path, copies: int, reach: float,
         raise ValueError(f"episodes must be in 1..{src.num_episodes}, got {episodes}")
     collection = src.rmbench["collection"]
     width, height = (int(v) for v in collection["resolution"].split("x"))
+    spec = L.Spec(tuple(src.cameras), width, height)
+    if collection.get("fps") != spec.fps or collection.get("codec") != spec.codec.info():
+        raise DatasetError(f"{src.root} was recorded at another frame rate or codec than this "
+                           f"version writes; collect it again")
     identity = {**collection, COPY_KEY: {"copies": copies, "reach": reach, "seed": seed,
                                          "source_episodes": n}}
-    writer = DatasetWriter(out, src.task, L.Spec(tuple(src.cameras), width, height), identity,
-                           overwrite=overwrite)
+    writer = DatasetWriter(out, src.task, spec, identity, overwrite=overwrite)
     start = writer.num_episodes
     first, first_copy = _resume_point(writer, copies)
     executor = make_executor(workers, backend, on_close=_close_copier)

@@ -40,12 +40,22 @@ def xy_columns(state_names) -> tuple[np.ndarray, np.ndarray]:
     return np.array(xs, np.int64), np.array(ys, np.int64)
 
 
+def visibility_columns(state_names, columns: np.ndarray) -> np.ndarray:
+    """For each position entry in ``columns``, the index of its object's ``*_visible`` flag,
+    or -1 for an object always in view. A hidden object's pose is zeroed
+    (``tasks/state.py``), and a zero does not move with the scene."""
+    names = list(state_names)
+    return np.array([names.index(f"{names[i][:-2]}_visible")
+                     if f"{names[i][:-2]}_visible" in names else -1 for i in columns], np.int64)
+
+
 class LayoutShift:
     """Shifted copies of episodes (one instance per process: it holds a MuJoCo buffer)."""
 
     def __init__(self, state_names):
         self.kin = GraspKinematics()
         self.xs, self.ys = xy_columns(state_names)
+        self.xs_seen, self.ys_seen = (visibility_columns(state_names, c) for c in (self.xs, self.ys))
         self.rest = {side: self.kin.forward(side, np.asarray(HOME_ARM[side], float))[0]
                      for side in robot.SIDES}
 
@@ -80,8 +90,9 @@ class LayoutShift:
         if action is None:
             return None
         env = np.array(ep.environment_state, np.float32)
-        env[:, self.xs] += np.float32(delta[0])
-        env[:, self.ys] += np.float32(delta[1])
+        for cols, seen, d in ((self.xs, self.xs_seen, delta[0]), (self.ys, self.ys_seen, delta[1])):
+            shown = np.where(seen >= 0, env[:, np.maximum(seen, 0)] != 0, True)
+            env[:, cols] += np.float32(d) * shown
         return replace(ep, state=state, action=action, environment_state=env)
 
 

@@ -106,13 +106,13 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     examples = Mem0Frames(ds, cfg, decompose, executor_texts.index(goal))
     stats = ds.stats
     # The joint targets' range is the recorded demonstrations' (measured before any copies).
-    joint_norm = Normalizer.for_demonstrations(stats, examples.low_dim, cfg.horizon,
-                                               cfg.relative_actions)
+    norm = (None if cfg.action_space == "ee" else Normalizer.for_demonstrations(
+        stats, examples.low_dim, cfg.horizon, cfg.relative_actions))
     if cfg.layout_copies:
         describe["layout_copies_kept"] = add_layout_copies(
             examples, cfg.layout_copies, cfg.layout_shift, train_cfg.seed)
-    norm = (to_pose_actions(examples, stats, cfg.horizon) if cfg.action_space == "ee"
-            else joint_norm)
+    if norm is None:
+        norm = to_pose_actions(examples, stats, cfg.horizon)
     model.executor.normalizer.load_state_dict(norm.state_dict())
     if cfg.reads_state:
         encoders = (model.executor.encoders, model.planner.encoders)
