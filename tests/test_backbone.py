@@ -66,6 +66,7 @@ def forbid_encoding(monkeypatch) -> None:
 
     monkeypatch.setattr(feature_cache, "backbone_features", boom)
     monkeypatch.setattr(FrameCache, "frames", boom)
+    monkeypatch.setattr(FrameCache, "read_once", boom)
 
 
 def cache_of(ds, folder) -> FeatureCache:
@@ -189,3 +190,21 @@ def test_a_bad_backbone_is_a_one_line_error(dataset, tmp_path, capsys):
                  "--set", "backbone=resnet18"]) == 2
     err = capsys.readouterr().err.strip()
     assert "backbone must be one of" in err and len(err.splitlines()) == 1, err
+
+
+def test_encoding_stores_no_decoded_frames(dataset, tmp_path, counted):
+    """The cache reads each frame once: decoded in memory, not written to the frame cache
+    (which for a few hundred episodes would be tens of gigabytes)."""
+    ds = Dataset(dataset)
+    frames = FrameCache(ds, BACKBONE["image_size"])
+    before = set(frames.dir.rglob("*.npy")) if frames.dir.exists() else set()
+    cache = cache_of(ds, tmp_path / "features")
+    cache.build([0], CAMERAS)
+    after = set(frames.dir.rglob("*.npy")) if frames.dir.exists() else set()
+    assert after == before and sum(counted) == int(ds.lengths[0]) * len(CAMERAS)
+    np.testing.assert_allclose(  # the features of the frames a stored cache would hold
+        cache.features(0, CAMERAS[0])[:4],
+        feature_cache.backbone_features(
+            BACKBONE["backbone"], BACKBONE["backbone_stride"],
+            torch.from_numpy(np.array(frames.frames(0, CAMERAS[0])[:4])).permute(0, 3, 1, 2)),
+        atol=1e-5)

@@ -2,8 +2,8 @@
 policy with a frozen backbone (``backbone`` in its config) trains without running it.
 
 Each (episode, camera) is the frame cache's frames (the decoded frames resized to the policy's
-image size by the antialiased resize the closed loop uses too) through the backbone up to its
-feature map at the stride: float32 (T, C, h, w) in
+image size by the antialiased resize the closed loop uses too; not stored for this) through
+the backbone up to its feature map at the stride: float32 (T, C, h, w) in
 ``DATASET/.cache/features-<backbone>-s<stride>-<W>x<H>/<camera>/``. The frame cache's rules
 hold: a file is written under a temporary name and renamed into place, and its name carries the
 video file's size and modification time, so a dataset collected anew into the same folder is
@@ -101,7 +101,7 @@ class FeatureCache:
         return array
 
     def _encode(self, episode: int, camera: str, path: Path) -> None:
-        frames = FrameCache(self.ds, self.size).frames(episode, camera)
+        frames = FrameCache(self.ds, self.size).read_once(episode, camera)
         out = np.empty((len(frames), *self.shape), dtype=np.float32)
         for i in range(0, len(frames), ENCODE_BATCH):
             images = torch.from_numpy(np.array(frames[i:i + ENCODE_BATCH])).permute(0, 3, 1, 2)
