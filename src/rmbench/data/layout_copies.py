@@ -5,10 +5,10 @@ demonstrations: each one copied with every position of the environment state mov
 (dx, dy) and the arms' joints solved for the moved grasp poses. A pixel policy reads the
 cameras, so its copies must be rendered. Here each demonstration is replayed from its seed
 (the executed actions re-drawn from the dataset's noise spec, every frame checked against the
-recorded state, as ``Recorder._replay`` does), and at every frame each copy is drawn from a
-second ``MjData``: the recorded state with every scene piece moved by the copy's shift (free
-pieces through their joints, fixed ones through ``model.body_pos``, put back after the
-frame) and the arms at the copy's solved joints, the grippers as recorded.
+recorded state by ``record.replay``, as a collection's recorded pass is), and at every frame
+each copy is drawn from a second ``MjData``: the recorded state with every scene piece moved
+by the copy's shift (free pieces through their joints, fixed ones through ``model.body_pos``,
+put back after the frame) and the arms at the copy's solved joints, the grippers as recorded.
 
 The output is an ordinary dataset: per source episode, the episode itself (copy 0, its frames
 the replay's own, so it equals the source) and then its kept copies, each committed through
@@ -38,7 +38,7 @@ from tqdm import tqdm
 from rmbench.data import layout as L
 from rmbench.data.layout_shift import LayoutShift
 from rmbench.data.reader import Dataset, Episode
-from rmbench.data.record import EpisodeRecord, ImageStats
+from rmbench.data.record import EpisodeRecord, ImageStats, ReplayMismatch, executed_action, replay
 from rmbench.data.writer import DatasetError, DatasetWriter
 from rmbench.envs.noise import NoiseSpec, perturber
 from rmbench.envs.registration import make
@@ -114,6 +114,15 @@ class SceneShift:
         return frames, sim.ee_pose(d)
 
 
+def _recorded_as(src: Dataset) -> tuple[L.Spec, NoiseSpec | None]:
+    """The cameras, resolution and action noise ``src`` was collected with."""
+    collection = src.rmbench["collection"]
+    width, height = (int(v) for v in collection["resolution"].split("x"))
+    noise = collection.get("action_noise")
+    return (L.Spec(tuple(src.cameras), width, height),
+            None if noise is None else NoiseSpec(**noise))
+
+
 class Copier:
     """Copies of one source dataset's episodes, in one process: the env, its second MjData and
     the inverse kinematics are built once and reused."""
@@ -121,15 +130,11 @@ class Copier:
     def __init__(self, source: str | Path):
         self.source = str(source)
         self.src = Dataset(source)
-        collection = self.src.rmbench["collection"]
-        width, height = (int(v) for v in collection["resolution"].split("x"))
-        self.spec = L.Spec(tuple(self.src.cameras), width, height)
-        spec = collection.get("action_noise")
-        self.noise = None if spec is None else NoiseSpec(**spec)
-        self.env = make(self.src.task, render=True, cameras=self.spec.cameras, width=width,
-                        height=height)
+        self.spec, self.noise = _recorded_as(self.src)
+        self.env = make(self.src.task, render=True, cameras=self.spec.cameras,
+                        width=self.spec.width, height=self.spec.height)
         self.shifter, self.scene = LayoutShift(self.src.state_names), SceneShift(self.env)
-        self.renderer = self.env.unwrapped.sim.renderer(width, height)
+        self.renderer = self.env.unwrapped.sim.renderer(self.spec.width, self.spec.height)
 
     def close(self) -> None:
         self.env.close()
@@ -148,9 +153,38 @@ class Copier:
                 continue
             kept[k] = replace(moved, hidden={**ep.hidden, COPY_KEY: {
                 "episode": e, "copy": k, "shift": deltas[k].round(6).tolist()}})
-        records = _render(self.env, self.scene, self.renderer, ep, kept, deltas, self.noise,
-                          self.spec)
-        return records, missed
+        return self._render(ep, kept, deltas), missed
+
+    def _render(self, ep: Episode, copies: dict[int, Episode],
+                deltas: np.ndarray) -> list[EpisodeRecord]:
+        """Replay ``ep`` from its seed and draw each copy k (moved by ``deltas[k]``) at every
+        frame; the copies as records, in order."""
+        cams, spec = self.spec.cameras, self.spec
+        enc = {k: {c: Mp4Encoder(spec.fps, spec.codec) for c in cams} for k in copies}
+        stats = {k: {c: ImageStats() for c in cams} for k in copies}
+        ee = {k: np.empty_like(ep.ee_pose) for k in copies}
+        perturb = perturber(self.noise, ep.seed, self.env)
+        executed = [executed_action(a, perturb) for a in ep.action.astype(np.float64)]
+        frames = replay(self.env, ep.seed, executed, ep.state, ep.environment_state,
+                        f"episode {ep.index} (seed {ep.seed})")
+        try:
+            for t, obs in enumerate(frames):
+                for k, copy in copies.items():
+                    if k == 0:  # the episode itself: the replay's own frames, as recorded
+                        drawn, ee[k][t] = obs["pixels"], ep.ee_pose[t]
+                    else:
+                        drawn, ee[k][t] = self.scene.render(self.renderer, cams, copy.state[t],
+                                                            deltas[k])
+                    for c in cams:
+                        enc[k][c].add(drawn[c])
+                        stats[k][c].add(drawn[c])
+        except ReplayMismatch as err:
+            raise DatasetError(str(err)) from None
+        return [EpisodeRecord(
+            ep.task, ep.seed, True, "success", ep.instruction, copy.hidden, copy.state,
+            ee[k].astype(np.float32), copy.action, ep.subtask_index, ep.progress,
+            {c: enc[k][c].finish() for c in cams}, {c: s.result() for c, s in stats[k].items()},
+            environment_state=copy.environment_state) for k, copy in copies.items()]
 
 
 # One Copier per worker process, built on first use (the env takes a while to compile).
@@ -210,8 +244,7 @@ def copy_layouts(source: str | Path, out: str | Path, copies: int, reach: float,
     if not 1 <= n <= src.num_episodes:
         raise ValueError(f"episodes must be in 1..{src.num_episodes}, got {episodes}")
     collection = src.rmbench["collection"]
-    width, height = (int(v) for v in collection["resolution"].split("x"))
-    spec = L.Spec(tuple(src.cameras), width, height)
+    spec, _ = _recorded_as(src)
     if collection.get("fps") != spec.fps or collection.get("codec") != spec.codec.info():
         raise DatasetError(f"{src.root} was recorded at another frame rate or codec than this "
                            f"version writes; collect it again")
@@ -243,41 +276,3 @@ def copy_layouts(source: str | Path, out: str | Path, copies: int, reach: float,
     return CopySummary(str(writer.root), n, writer.num_episodes, writer.num_episodes - start,
                        missed, writer.total_frames, round(time.perf_counter() - t0, 2))
 
-
-def _render(env, scene: SceneShift, renderer, ep: Episode, copies: dict[int, Episode],
-            deltas: np.ndarray, noise: NoiseSpec | None, spec: L.Spec) -> list[EpisodeRecord]:
-    """Replay ``ep`` from its seed and draw each copy k (moved by ``deltas[k]``) at every
-    frame; the copies as records, in order."""
-    cams = spec.cameras
-    enc = {k: {c: Mp4Encoder(spec.fps, spec.codec) for c in cams} for k in copies}
-    stats = {k: {c: ImageStats() for c in cams} for k in copies}
-    ee = {k: np.empty_like(ep.ee_pose) for k in copies}
-    obs, _ = env.reset(seed=ep.seed)
-    perturb = perturber(noise, ep.seed, env)
-    task = env.unwrapped.task
-    info: dict = {}
-    for t in range(len(ep)):
-        if not (np.array_equal(obs["agent_pos"].astype(np.float32), ep.state[t]) and
-                np.array_equal(task.environment_state().astype(np.float32),
-                               ep.environment_state[t])):
-            raise DatasetError(f"episode {ep.index} (seed {ep.seed}): the replay differs from "
-                               f"the recorded state at frame {t}")
-        for k, copy in copies.items():
-            if k == 0:  # the episode itself: the replay's own frames, as recorded
-                frames, ee[k][t] = obs["pixels"], ep.ee_pose[t]
-            else:
-                frames, ee[k][t] = scene.render(renderer, cams, copy.state[t], deltas[k])
-            for c in cams:
-                enc[k][c].add(frames[c])
-                stats[k][c].add(frames[c])
-        action = ep.action[t].astype(np.float64)
-        executed = (action if perturb is None
-                    else np.asarray(perturb(action), np.float32).astype(np.float64))
-        obs, _, _, _, info = env.step(executed)
-    if not info.get("is_success"):
-        raise DatasetError(f"episode {ep.index} (seed {ep.seed}): the replay did not succeed")
-    return [EpisodeRecord(
-        ep.task, ep.seed, True, "success", ep.instruction, copy.hidden, copy.state,
-        ee[k].astype(np.float32), copy.action, ep.subtask_index, ep.progress,
-        {c: enc[k][c].finish() for c in cams}, {c: s.result() for c, s in stats[k].items()},
-        environment_state=copy.environment_state) for k, copy in copies.items()]

@@ -166,19 +166,37 @@ class Recorder:
         env, _ = self._env(render=True)
         encoders = {c: Mp4Encoder(self.spec.fps, self.spec.codec) for c in self.spec.cameras}
         stats = {c: ImageStats() for c in self.spec.cameras}
-        obs, info = env.reset(seed=seed)
-        for t, action in enumerate(traj.executed):
-            if not (np.array_equal(obs["agent_pos"], traj.state[t]) and np.array_equal(
-                    env.unwrapped.task.environment_state(), traj.environment_state[t])):
-                raise ReplayMismatch(f"{self.task} seed {seed}: replay state differs from the "
-                                     f"searched episode at frame {t}")
+        for obs in replay(env, seed, traj.executed, traj.state, traj.environment_state,
+                          f"{self.task} seed {seed}"):
             for cam in self.spec.cameras:
                 encoders[cam].add(obs["pixels"][cam])
                 stats[cam].add(obs["pixels"][cam])
-            obs, _, terminated, truncated, info = env.step(action)
-        if not info.get("is_success"):
-            raise ReplayMismatch(f"{self.task} seed {seed}: the replay did not succeed")
         return encoders, stats
+
+
+def executed_action(action: np.ndarray, perturb) -> np.ndarray:
+    """What the env executes for ``action`` (float64): the action, or with noise the action
+    plus the noise rounded to float32, as a replay from the stored actions re-draws it."""
+    return action if perturb is None else np.asarray(perturb(action), np.float32).astype(np.float64)
+
+
+def replay(env, seed: int, executed, state, environment_state, label: str):
+    """Step ``env`` from ``seed`` through the ``executed`` actions, yielding each frame's
+    observation once it is checked against the recorded ``state`` and ``environment_state``
+    rows (compared at their own precision); a ``ReplayMismatch`` where they differ or where
+    the episode does not end in success."""
+    obs, info = env.reset(seed=seed)
+    task = env.unwrapped.task
+    for t, action in enumerate(executed):
+        want, want_env = np.asarray(state[t]), np.asarray(environment_state[t])
+        if not (np.array_equal(np.asarray(obs["agent_pos"], want.dtype), want) and np.array_equal(
+                np.asarray(task.environment_state(), want_env.dtype), want_env)):
+            raise ReplayMismatch(f"{label}: the replay differs from the recorded state at "
+                                 f"frame {t}")
+        yield obs
+        obs, _, _, _, info = env.step(action)
+    if not info.get("is_success"):
+        raise ReplayMismatch(f"{label}: the replay did not succeed")
 
 
 def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = None,
@@ -201,8 +219,7 @@ def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = 
         if expert.gave_up:
             traj.reason = f"expert gave up: {expert.gave_up}"
             return traj
-        executed = (action if perturb is None
-                    else np.asarray(perturb(action), np.float32).astype(np.float64))
+        executed = executed_action(action, perturb)
         traj.state.append(obs["agent_pos"])
         traj.ee_pose.append(sim.ee_pose())
         traj.environment_state.append(env.unwrapped.task.environment_state())
