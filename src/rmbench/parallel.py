@@ -10,6 +10,8 @@ carries its sender's source fingerprint and a worker that imported other source 
 from __future__ import annotations
 
 import os
+import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
@@ -45,9 +47,26 @@ class Inline:
             self.on_close()
 
 
-def _share_cores(threads: int) -> None:
-    """Worker start-up: each of N workers gets cores/N threads for OpenMP/BLAS (torch reads
-    this when a learned policy first imports it), instead of every worker taking all cores."""
+def exit_with_parent(poll_s: float = 2.0) -> None:
+    """End this process when the process that started it dies (it is then re-parented). A
+    parent killed by a signal runs no clean-up: without this its workers and jobs would go on
+    with what they hold (a layout copy or a training for minutes) beside the run that resumes
+    it, taking its cores. Whatever they committed stays: every writer here writes atomically."""
+    parent = os.getppid()
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
+def _start_worker(threads: int) -> None:
+    """Worker start-up: the worker ends with its parent, and each of N workers gets cores/N
+    threads for OpenMP/BLAS (torch reads this when a learned policy first imports it),
+    instead of every worker taking all cores."""
+    exit_with_parent()
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ.setdefault(var, str(threads))
 
@@ -64,7 +83,7 @@ class Pool:
     def __init__(self, workers: int):
         self.window = 2 * workers
         self.pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"),
-                                        initializer=_share_cores,
+                                        initializer=_start_worker,
                                         initargs=(max(1, (os.cpu_count() or 1) // workers),))
 
     def submit(self, fn, *args):

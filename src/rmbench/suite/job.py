@@ -10,10 +10,10 @@ import contextlib
 import hashlib
 import json
 import sys
-import time
 from pathlib import Path
 
 from rmbench import source
+from rmbench.parallel import exit_with_parent
 from rmbench.suite import stages
 from rmbench.suite.plan import Plan
 
@@ -50,23 +50,6 @@ def run_job(plan: dict, out: str, kind: str, task: str, spec: str, threads: int,
             stages.train_stage(p, out_dir, task, spec)
         else:
             stages.eval_stage(p, out_dir, task, spec)
-
-
-def exit_with_parent(poll_s: float = 2.0) -> None:
-    """End this process when the runner that started it dies (it is then re-parented), so a
-    killed runner leaves no job writing beside the one a re-run starts; every stage writes
-    atomically, so what the job saved stays."""
-    import os
-    import threading
-
-    parent = os.getppid()
-
-    def watch():
-        while os.getppid() == parent:
-            time.sleep(poll_s)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True).start()
 
 
 def main(argv: list[str] | None = None) -> int:
