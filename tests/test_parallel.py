@@ -25,7 +25,7 @@ os.kill(os.getpid(), signal.SIGKILL)
 def _alive(pid: int) -> bool:
     try:
         state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except (FileNotFoundError, ProcessLookupError):
+    except FileNotFoundError:  # no such process
         return False
     return state != "Z"  # a zombie has ended; only its reaping is left
 

@@ -115,12 +115,17 @@ class SceneShift:
 
 
 def _recorded_as(src: Dataset) -> tuple[L.Spec, NoiseSpec | None]:
-    """The cameras, resolution and action noise ``src`` was collected with."""
+    """The cameras, resolution and action noise ``src`` was collected with; a DatasetError if
+    it was recorded at a frame rate or codec this version does not write (its copies would
+    not match it)."""
     collection = src.rmbench["collection"]
     width, height = (int(v) for v in collection["resolution"].split("x"))
+    spec = L.Spec(tuple(src.cameras), width, height)
+    if collection.get("fps") != spec.fps or collection.get("codec") != spec.codec.info():
+        raise DatasetError(f"{src.root} was recorded at another frame rate or codec than this "
+                           f"version writes; collect it again")
     noise = collection.get("action_noise")
-    return (L.Spec(tuple(src.cameras), width, height),
-            None if noise is None else NoiseSpec(**noise))
+    return spec, None if noise is None else NoiseSpec(**noise)
 
 
 class Copier:
@@ -243,11 +248,8 @@ def copy_layouts(source: str | Path, out: str | Path, copies: int, reach: float,
     n = src.num_episodes if episodes is None else episodes
     if not 1 <= n <= src.num_episodes:
         raise ValueError(f"episodes must be in 1..{src.num_episodes}, got {episodes}")
-    collection = src.rmbench["collection"]
     spec, _ = _recorded_as(src)
-    if collection.get("fps") != spec.fps or collection.get("codec") != spec.codec.info():
-        raise DatasetError(f"{src.root} was recorded at another frame rate or codec than this "
-                           f"version writes; collect it again")
+    collection = src.rmbench["collection"]
     identity = {**collection, COPY_KEY: {"copies": copies, "reach": reach, "seed": seed,
                                          "source_episodes": n}}
     writer = DatasetWriter(out, src.task, spec, identity, overwrite=overwrite)
