@@ -45,3 +45,15 @@ def test_a_worker_ends_when_its_parent_is_killed(tmp_path):
     if _alive(worker):
         os.kill(worker, 9)
         pytest.fail(f"worker {worker} still running its job after its parent was killed")
+
+
+def test_a_worker_whose_parent_died_before_it_started_ends():
+    # the parent names its pid: a worker that read getppid() at start-up would find its
+    # re-parenting process there and run on
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    run = subprocess.run(
+        [sys.executable, "-c", "import time; from rmbench.parallel import exit_with_parent; "
+         f"exit_with_parent({gone.pid}, poll_s=0.05); time.sleep(60)"],
+        capture_output=True, text=True, timeout=30)
+    assert (run.returncode, run.stderr) == (1, "")

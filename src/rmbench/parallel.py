@@ -47,12 +47,13 @@ class Inline:
             self.on_close()
 
 
-def exit_with_parent(poll_s: float = 2.0) -> None:
-    """End this process when the process that started it dies (it is then re-parented). A
-    parent killed by a signal runs no clean-up: without this its workers and jobs would go on
-    with what they hold (a layout copy or a training for minutes) beside the run that resumes
-    it, taking its cores. Whatever they committed stays: every writer here writes atomically."""
-    parent = os.getppid()
+def exit_with_parent(parent: int, poll_s: float = 2.0) -> None:
+    """End this process when ``parent`` (the pid of the process that started it) dies: it is
+    then re-parented. A parent killed by a signal runs no clean-up: without this its workers
+    and jobs would go on with what they hold (a layout copy or a training for minutes) beside
+    the run that resumes it, taking its cores. The parent names itself because a worker that
+    read its parent's pid at start-up would take the re-parenting process for its parent if the
+    parent died before then. Whatever they committed stays: every writer here writes atomically."""
 
     def watch():
         while os.getppid() == parent:
@@ -62,11 +63,11 @@ def exit_with_parent(poll_s: float = 2.0) -> None:
     threading.Thread(target=watch, daemon=True).start()
 
 
-def _start_worker(threads: int) -> None:
+def _start_worker(parent: int, threads: int) -> None:
     """Worker start-up: the worker ends with its parent, and each of N workers gets cores/N
     threads for OpenMP/BLAS (torch reads this when a learned policy first imports it),
     instead of every worker taking all cores."""
-    exit_with_parent()
+    exit_with_parent(parent)
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ.setdefault(var, str(threads))
 
@@ -84,7 +85,7 @@ class Pool:
         self.window = 2 * workers
         self.pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"),
                                         initializer=_start_worker,
-                                        initargs=(max(1, (os.cpu_count() or 1) // workers),))
+                                        initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // workers)))
 
     def submit(self, fn, *args):
         return self.pool.submit(_run_checked, source.AT_IMPORT, fn, *args)

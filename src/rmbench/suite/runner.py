@@ -77,7 +77,8 @@ class LocalJobs:
     def start(self, plan: Plan, out: Path, job: Job, log: Path) -> None:
         cmd = [sys.executable, "-m", "rmbench.suite.job", "--plan", json.dumps(plan.to_dict()),
                "--out", str(out), "--kind", job.kind, "--task", job.task, "--spec", job.spec,
-               "--threads", str(self.threads), "--digest", source_digest()]
+               "--threads", str(self.threads), "--digest", source_digest(),
+               "--parent", str(os.getpid())]
         env = {**os.environ, **{v: str(self.threads) for v in
                                 ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}}
         f = open(log, "a")
