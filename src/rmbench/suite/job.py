@@ -9,7 +9,6 @@ import argparse
 import contextlib
 import hashlib
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -62,10 +61,10 @@ def main(argv: list[str] | None = None) -> int:
     a.add_argument("--spec", default="")
     a.add_argument("--threads", type=int, default=1)
     a.add_argument("--digest", required=True)
-    a.add_argument("--parent", type=int, default=None,
+    a.add_argument("--parent", type=int, required=True,
                    help="the pid of the table's runner: the job ends when it does")
     args = a.parse_args(argv)
-    exit_with_parent(os.getppid() if args.parent is None else args.parent)
+    exit_with_parent(args.parent)
     try:
         run_job(json.loads(args.plan), args.out, args.kind, args.task, args.spec, args.threads,
                 args.digest)
