@@ -16,14 +16,30 @@ from twice that on. The rest pose's joints stay exact, which is where every eval
 A copy whose solved poses miss by more than ``MAX_MISS`` anywhere (a shift out of an arm's
 reach) is left out. This is kinematics only: the copy is what the recorded arm motion would
 be over the moved scene, not a new simulation of it.
+
+Solving the copies takes about two minutes for 16 copies of 50 demonstrations, and every
+policy trained on a dataset asks for the same ones (the seed is the training seed), so
+``add_layout_copies`` keeps them in ``DATASET/.cache/layout-shift-*.npz``: named by the
+copies, reach, seed, the constants above, MuJoCo's version and each demonstration's data
+file (size and modification time), written atomically, and checked on reading by solving
+the first copy again (a changed robot model or solver fails it). A file that fails any of
+this is solved again and replaced.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+import logging
+import os
+import zipfile
 from dataclasses import replace
+from pathlib import Path
 
+import mujoco
 import numpy as np
 
+from rmbench.data import layout as L
 from rmbench.data.reader import Episode
 from rmbench.sim import robot
 from rmbench.sim.kinematics import GraspKinematics, natural_yaw
@@ -31,6 +47,9 @@ from rmbench.sim.station import HOME_ARM
 
 REST_RADIUS = 0.05  # m: within this of its rest position a grasp site is not shifted
 MAX_MISS = 0.003  # m: a solved pose farther than this from its shifted target drops the copy
+CACHE_FORMAT = 1  # bumped when what a cache file holds changes
+
+log = logging.getLogger(__name__)
 
 
 def xy_columns(state_names) -> tuple[np.ndarray, np.ndarray]:
@@ -96,28 +115,98 @@ class LayoutShift:
         return replace(ep, state=state, action=action, environment_state=env)
 
 
+def _draws(episodes: list[Episode], copies: int, reach: float, seed: int):
+    """(position in ``episodes``, shift) of every copy, in the order they are drawn."""
+    rng = np.random.default_rng(seed)
+    return [(k, rng.uniform(-reach, reach, 2)) for k in range(len(episodes)) for _ in range(copies)]
+
+
 def shifted_copies(episodes: list[Episode], state_names, copies: int, reach: float,
-                   seed: int) -> list[Episode]:
+                   seed: int, cache: str | Path | None = None) -> list[Episode]:
     """``copies`` shifted copies of each episode, each by (dx, dy) ~ U[-reach, reach]^2 drawn
-    from ``seed``; copies out of reach are left out (so fewer may come back)."""
+    from ``seed``; copies out of reach are left out (so fewer may come back). With ``cache``
+    (a file the caller names for these arguments), read from it when it holds them, else
+    stored there."""
     if copies < 0 or reach < 0:
         raise ValueError(f"layout copies and shift must be >= 0, got {copies} and {reach}")
     if copies == 0 or reach == 0:
         return []
-    shifter, rng = LayoutShift(state_names), np.random.default_rng(seed)
-    out = []
-    for ep in episodes:
-        for _ in range(copies):
-            moved = shifter.shift(ep, rng.uniform(-reach, reach, 2))
-            if moved is not None:
-                out.append(moved)
+    shifter = LayoutShift(state_names)
+    if cache is not None and (hit := _load(Path(cache), episodes, shifter)) is not None:
+        return hit
+    out, kept = [], []
+    for k, delta in _draws(episodes, copies, reach, seed):
+        moved = shifter.shift(episodes[k], delta)
+        if moved is not None:
+            out.append(moved)
+            kept.append((k, delta))
+    if cache is not None:
+        _save(Path(cache), out, kept)
     return out
+
+
+def _save(path: Path, copies: list[Episode], kept: list) -> None:
+    """The copies as one .npz, written under a temporary name and renamed into place."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    arrays = {"source": np.array([k for k, _ in kept], np.int64).reshape(-1),
+              "delta": np.array([d for _, d in kept], np.float64).reshape(-1, 2),
+              "lengths": np.array([len(ep) for ep in copies], np.int64).reshape(-1)}
+    for name in ("state", "action", "environment_state"):
+        arrays[name] = np.concatenate([getattr(ep, name) for ep in copies]) if copies else np.zeros(0)
+    with open(tmp, "wb") as f:
+        np.savez(f, **arrays)
+    os.replace(tmp, path)
+
+
+def _load(path: Path, episodes: list[Episode], shifter: LayoutShift) -> list[Episode] | None:
+    """The copies stored at ``path``, or None (logged) if it is missing, damaged, does not
+    fit ``episodes`` or its first copy solves differently now."""
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            a = {k: f[k] for k in ("source", "delta", "lengths", "state", "action",
+                                   "environment_state")}
+        src, lengths = a["source"], a["lengths"]
+        if len(src) != len(lengths) or len(src) != len(a["delta"]) or (
+                len(src) and (src.min() < 0 or src.max() >= len(episodes))):
+            raise ValueError("its copies do not match the demonstrations")
+        if [len(episodes[k]) for k in src] != lengths.tolist():
+            raise ValueError("its copies' lengths are not their demonstrations'")
+        ends = np.cumsum(lengths)
+        rows = {n: np.split(a[n], ends[:-1]) if len(src) else [] for n in
+                ("state", "action", "environment_state")}
+        copies = [replace(episodes[k], state=rows["state"][i], action=rows["action"][i],
+                          environment_state=rows["environment_state"][i])
+                  for i, k in enumerate(src)]
+        if copies:
+            again = shifter.shift(episodes[src[0]], a["delta"][0])
+            if again is None or not all(np.array_equal(getattr(again, n), getattr(copies[0], n))
+                                        for n in ("state", "action", "environment_state")):
+                raise ValueError("its first copy solves differently now")
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as e:
+        log.warning("%s: solving the layout copies again (%s)", path, e)
+        return None
+    return copies
+
+
+def cache_path(examples, copies: int, reach: float, seed: int) -> Path:
+    """Where ``add_layout_copies`` keeps the copies of ``examples``' demonstrations."""
+    ds = examples.ds
+    sources = [(ep.index, (s := (ds.root / L.data_file(ep.index)).stat()).st_size, s.st_mtime_ns)
+               for ep in examples.low_dim]
+    key = json.dumps([CACHE_FORMAT, copies, reach, seed, REST_RADIUS, MAX_MISS,
+                      mujoco.__version__, sources])
+    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
+    return ds.root / ".cache" / f"layout-shift-{copies}x{reach:g}-seed{seed}-{digest}.npz"
 
 
 def add_layout_copies(examples, copies: int, reach: float, seed: int) -> int:
     """Append ``copies`` shifted copies (up to ``reach`` metres) of each demonstration to
     ``examples`` (a ``DemoDataset`` read without cameras); how many were kept."""
     before = len(examples.low_dim)
+    cache = cache_path(examples, copies, reach, seed) if copies and reach else None
     examples.add_episodes(shifted_copies(examples.low_dim, examples.ds.state_names, copies,
-                                         reach, seed))
+                                         reach, seed, cache))
     return len(examples.low_dim) - before

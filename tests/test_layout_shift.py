@@ -1,0 +1,78 @@
+"""Shifted layout copies are solved once per dataset: a second training reads them back, and a
+damaged or stale cache file is solved again rather than trusted."""
+
+import shutil
+
+import numpy as np
+import pytest
+
+from rmbench.data.layout_shift import LayoutShift, add_layout_copies
+from rmbench.data.reader import Dataset
+from rmbench.data.torch_dataset import DemoDataset
+
+COPIES, REACH = 2, 0.02
+FIELDS = ("state", "action", "environment_state")
+
+
+@pytest.fixture
+def root(dataset, tmp_path):
+    out = tmp_path / "ds"
+    shutil.copytree(dataset, out, ignore=shutil.ignore_patterns(".cache"))
+    return out
+
+
+@pytest.fixture
+def solves(monkeypatch):
+    """How many single copies were solved."""
+    calls = []
+    shift = LayoutShift.shift
+    monkeypatch.setattr(LayoutShift, "shift", lambda self, ep, d: calls.append(1) or shift(self, ep, d))
+    return calls
+
+
+def with_copies(root, seed=0):
+    examples = DemoDataset(Dataset(root), chunk=8, cameras=[], environment_state=True)
+    kept = add_layout_copies(examples, COPIES, REACH, seed)
+    return examples.low_dim[len(examples.low_dim) - kept:]
+
+
+def assert_same(a, b):
+    assert len(a) == len(b) > 0
+    for x, y in zip(a, b, strict=True):
+        assert x.index == y.index and x.instruction == y.instruction
+        for f in FIELDS:
+            np.testing.assert_array_equal(getattr(x, f), getattr(y, f))
+
+
+def test_copies_are_solved_once_and_read_back(root, solves):
+    n = Dataset(root).num_episodes
+    first = with_copies(root)
+    assert len(solves) == COPIES * n
+    files = list((root / ".cache").glob("layout-shift-*.npz"))
+    assert len(files) == 1
+    again = with_copies(root)
+    assert len(solves) == COPIES * n + 1  # the first copy solved again as the check
+    assert_same(first, again)
+    with_copies(root, seed=1)  # another seed draws other shifts: its own file
+    assert len(list((root / ".cache").glob("layout-shift-*.npz"))) == 2
+
+
+def test_a_damaged_or_stale_cache_is_solved_again(root, solves, caplog):
+    first = with_copies(root)
+    (path,) = (root / ".cache").glob("layout-shift-*.npz")
+    path.write_bytes(path.read_bytes()[:200])  # cut short
+    solved = len(solves)
+    assert_same(first, with_copies(root))
+    assert len(solves) == 2 * solved and "solving the layout copies again" in caplog.text
+
+    with np.load(path) as f:  # what an older solver might have stored
+        arrays = dict(f)
+    arrays["action"][0] += 0.01
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+    caplog.clear()
+    assert_same(first, with_copies(root))
+    assert "solves differently" in caplog.text
+    caplog.clear()
+    assert_same(first, with_copies(root))  # replaced: read back, no warning
+    assert "solving" not in caplog.text
