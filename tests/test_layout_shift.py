@@ -1,5 +1,6 @@
-"""Shifted layout copies are solved once per dataset: a second training reads them back, and a
-damaged or stale cache file is solved again rather than trusted."""
+"""Shifted layout copies are solved once per dataset: a second training reads them back; a
+damaged, stale or mismatched cache file is solved again rather than trusted, and a dataset
+folder the cache cannot be written to still trains."""
 
 import shutil
 
@@ -76,3 +77,21 @@ def test_a_damaged_or_stale_cache_is_solved_again(root, solves, caplog):
     caplog.clear()
     assert_same(first, with_copies(root))  # replaced: read back, no warning
     assert "solving" not in caplog.text
+
+
+def test_copies_that_do_not_fit_their_demonstrations_are_solved_again(root, caplog):
+    first = with_copies(root)
+    (path,) = (root / ".cache").glob("layout-shift-*.npz")
+    with np.load(path) as f:
+        arrays = dict(f)
+    arrays["state"] = arrays["state"][:-1]  # one row short of its lengths
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+    assert_same(first, with_copies(root))
+    assert "lengths" in caplog.text
+
+
+def test_a_dataset_folder_the_cache_cannot_be_written_to_still_trains(root, caplog):
+    (root / ".cache").write_text("")  # a file where the cache folder would go
+    assert len(with_copies(root)) > 0
+    assert "not cached" in caplog.text

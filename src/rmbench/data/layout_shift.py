@@ -141,7 +141,10 @@ def shifted_copies(episodes: list[Episode], state_names, copies: int, reach: flo
             out.append(moved)
             kept.append((k, delta))
     if cache is not None:
-        _save(Path(cache), out, kept)
+        try:
+            _save(Path(cache), out, kept)
+        except OSError as e:  # a dataset folder that cannot be written to still trains
+            log.warning("%s: layout copies not cached (%s)", cache, e)
     return out
 
 
@@ -172,7 +175,8 @@ def _load(path: Path, episodes: list[Episode], shifter: LayoutShift) -> list[Epi
         if len(src) != len(lengths) or len(src) != len(a["delta"]) or (
                 len(src) and (src.min() < 0 or src.max() >= len(episodes))):
             raise ValueError("its copies do not match the demonstrations")
-        if [len(episodes[k]) for k in src] != lengths.tolist():
+        if [len(episodes[k]) for k in src] != lengths.tolist() or any(
+                len(a[n]) != lengths.sum() for n in ("state", "action", "environment_state")):
             raise ValueError("its copies' lengths are not their demonstrations'")
         ends = np.cumsum(lengths)
         rows = {n: np.split(a[n], ends[:-1]) if len(src) else [] for n in
