@@ -29,9 +29,9 @@ this is solved again and replaced.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import logging
-import os
 import zipfile
 from dataclasses import replace
 from pathlib import Path
@@ -44,10 +44,12 @@ from rmbench.data.reader import Episode
 from rmbench.sim import robot
 from rmbench.sim.kinematics import GraspKinematics, natural_yaw
 from rmbench.sim.station import HOME_ARM
+from rmbench.video import write_atomic
 
 REST_RADIUS = 0.05  # m: within this of its rest position a grasp site is not shifted
 MAX_MISS = 0.003  # m: a solved pose farther than this from its shifted target drops the copy
-CACHE_FORMAT = 1  # bumped when what a cache file holds changes
+CACHE_FORMAT = 2  # bumped when what a cache file holds changes
+FIELDS = ("state", "action", "environment_state")  # what a copy changes of its source
 
 log = logging.getLogger(__name__)
 
@@ -149,17 +151,14 @@ def shifted_copies(episodes: list[Episode], state_names, copies: int, reach: flo
 
 
 def _save(path: Path, copies: list[Episode], kept: list) -> None:
-    """The copies as one .npz, written under a temporary name and renamed into place."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    """The copies as one .npz, written atomically (their lengths are their sources')."""
     arrays = {"source": np.array([k for k, _ in kept], np.int64).reshape(-1),
-              "delta": np.array([d for _, d in kept], np.float64).reshape(-1, 2),
-              "lengths": np.array([len(ep) for ep in copies], np.int64).reshape(-1)}
-    for name in ("state", "action", "environment_state"):
+              "delta": np.array([d for _, d in kept], np.float64).reshape(-1, 2)}
+    for name in FIELDS:
         arrays[name] = np.concatenate([getattr(ep, name) for ep in copies]) if copies else np.zeros(0)
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-    os.replace(tmp, path)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    write_atomic(path, buf.getvalue())
 
 
 def _load(path: Path, episodes: list[Episode], shifter: LayoutShift) -> list[Episode] | None:
@@ -169,25 +168,22 @@ def _load(path: Path, episodes: list[Episode], shifter: LayoutShift) -> list[Epi
         return None
     try:
         with np.load(path, allow_pickle=False) as f:
-            a = {k: f[k] for k in ("source", "delta", "lengths", "state", "action",
-                                   "environment_state")}
-        src, lengths = a["source"], a["lengths"]
-        if len(src) != len(lengths) or len(src) != len(a["delta"]) or (
+            a = {k: f[k] for k in ("source", "delta", *FIELDS)}
+        src = a["source"]
+        if len(src) != len(a["delta"]) or (
                 len(src) and (src.min() < 0 or src.max() >= len(episodes))):
             raise ValueError("its copies do not match the demonstrations")
-        if [len(episodes[k]) for k in src] != lengths.tolist() or any(
-                len(a[n]) != lengths.sum() for n in ("state", "action", "environment_state")):
+        ends = np.cumsum([len(episodes[k]) for k in src], dtype=np.int64)
+        if any(len(a[n]) != (ends[-1] if len(src) else 0) for n in FIELDS):
             raise ValueError("its copies' lengths are not their demonstrations'")
-        ends = np.cumsum(lengths)
-        rows = {n: np.split(a[n], ends[:-1]) if len(src) else [] for n in
-                ("state", "action", "environment_state")}
+        rows = {n: np.split(a[n], ends[:-1]) if len(src) else [] for n in FIELDS}
         copies = [replace(episodes[k], state=rows["state"][i], action=rows["action"][i],
                           environment_state=rows["environment_state"][i])
                   for i, k in enumerate(src)]
         if copies:
             again = shifter.shift(episodes[src[0]], a["delta"][0])
             if again is None or not all(np.array_equal(getattr(again, n), getattr(copies[0], n))
-                                        for n in ("state", "action", "environment_state")):
+                                        for n in FIELDS):
                 raise ValueError("its first copy solves differently now")
     except (OSError, ValueError, KeyError, zipfile.BadZipFile) as e:
         log.warning("%s: solving the layout copies again (%s)", path, e)
@@ -210,7 +206,6 @@ def add_layout_copies(examples, copies: int, reach: float, seed: int) -> int:
     """Append ``copies`` shifted copies (up to ``reach`` metres) of each demonstration to
     ``examples`` (a ``DemoDataset`` read without cameras); how many were kept."""
     before = len(examples.low_dim)
-    cache = cache_path(examples, copies, reach, seed) if copies and reach else None
     examples.add_episodes(shifted_copies(examples.low_dim, examples.ds.state_names, copies,
-                                         reach, seed, cache))
+                                         reach, seed, cache_path(examples, copies, reach, seed)))
     return len(examples.low_dim) - before
