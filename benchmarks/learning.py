@@ -53,7 +53,7 @@ from pathlib import Path
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.eval.episode import ENDINGS
 from rmbench.suite import runner, stages
-from rmbench.suite.plan import Plan, add_recipe_arguments
+from rmbench.suite.plan import Plan, add_recipe_arguments, recipe_of
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
 
@@ -99,9 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         task = get_task(args.task)
         plan = Plan(args.obs, (task.name,), tuple(s.strip() for s in args.policies.split(",")
                                                   if s.strip()),
-                    demos=args.demos, steps=args.steps, batch=args.batch,
-                    episodes=args.episodes, noise=args.noise, noise_kind=args.noise_kind,
-                    sets=tuple(args.set))
+                    **recipe_of(args))
     except ValueError as err:
         raise SystemExit(f"learning.py: {err}") from None
     noise = f"_{args.noise_kind}{args.noise:g}" if args.noise else ""

@@ -189,6 +189,47 @@ def test_tables_mark_missing_and_absent_cells(tmp_path):
     assert stages.fraction(plan, tmp_path, "train", "put_back_block", "mem0") == 0.0
 
 
+def test_rendered_copies_are_the_training_data_with_their_features_encoded_once(
+        tmp_path, monkeypatch):
+    """--rendered-copies: the collect job renders the copies and encodes the frozen backbone's
+    features (one cache for Mem-0 and DP); training reads them; the folders say so."""
+    from dataclasses import replace
+
+    from tests.conftest import DATA_TASK as TASK
+
+    cams = ("head", "left_wrist", "right_wrist")
+    monkeypatch.setitem(stages.COLLECT_CAMERAS, "pixels", (cams, (64, 48)))
+    plan = Plan("pixels", (TASK,), ("mem0", "dp"), demos=1, steps=2, batch=2, episodes=1,
+                sets=("backbone=efficientnet_lite0", "backbone_stride=16"),
+                rendered_copies=1, rendered_reach=0.02)
+    plain = replace(plan, rendered_copies=0)
+    assert plan.train_data_dir(tmp_path, TASK).name == "data-copies1-r0.02"
+    assert plain.train_data_dir(tmp_path, TASK) == plan.data_dir(tmp_path, TASK)
+    assert plan.train_dir(tmp_path, TASK, "mem0") != plain.train_dir(tmp_path, TASK, "mem0")
+    assert plan.eval_dir(tmp_path, TASK, "mem0") != plain.eval_dir(tmp_path, TASK, "mem0")
+    assert runner.Job("collect", TASK) in runner.plan_jobs(plan, tmp_path)
+
+    summary = stages.collect_stage(plan, tmp_path, TASK)
+    assert summary["episodes"] == 1 and summary["rendered_copies"]["episodes"] == 2
+    (cache, wanted), = stages.feature_caches(plan, tmp_path, TASK)
+    assert wanted == ([0, 1], sorted(cams)) and cache.missing(*wanted) == []
+    assert stages.collected(plan, tmp_path, TASK)
+    assert runner.Job("collect", TASK) not in runner.plan_jobs(plan, tmp_path)
+    encoded = {p: p.stat().st_mtime_ns for p in cache.dir.rglob("*.npy")}
+    assert len(encoded) == 6
+    ckpt = stages.train_stage(plan, tmp_path, TASK, "mem0")
+    assert {p: p.stat().st_mtime_ns for p in cache.dir.rglob("*.npy")} == encoded
+    assert json.loads((ckpt / "config.json").read_text())["step"] == 2
+    # a killed rendering (no summary written) is finished by the next collect job
+    stages.copies_record(plan, tmp_path, TASK).unlink()
+    assert not stages.collected(plan, tmp_path, TASK)
+    assert stages.collect_stage(plan, tmp_path, TASK)["rendered_copies"]["episodes"] == 2
+
+    for bad in ({"rendered_copies": -1}, {"rendered_copies": 1, "rendered_reach": float("nan")}):
+        with pytest.raises(ValueError, match="rendered copies"):
+            replace(plan, **bad)
+
+
 @pytest.mark.slow
 def test_toy_table_on_ray(tmp_path):
     """The same toy table on a local Ray instance (the rmbench[ray] extra; 5 min beside two

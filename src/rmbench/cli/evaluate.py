@@ -59,15 +59,13 @@ def cmd_table(args) -> int:
     from pathlib import Path
 
     from rmbench.suite import runner, tables
-    from rmbench.suite.plan import ALL_POLICIES, Plan
+    from rmbench.suite.plan import ALL_POLICIES, Plan, recipe_of
     from rmbench.tasks.registry import ordered
 
     tasks = ([t.name for t in ordered()] if args.tasks == "all"
              else [t.strip() for t in args.tasks.split(",") if t.strip()])
     policies = [p.strip() for p in (args.policies or ",".join(ALL_POLICIES)).split(",") if p.strip()]
-    plan = Plan(args.obs, tuple(tasks), tuple(policies), demos=args.demos, steps=args.steps,
-                batch=args.batch, episodes=args.episodes, noise=args.noise,
-                noise_kind=args.noise_kind, sets=tuple(args.set), video=args.video)
+    plan = Plan(args.obs, tuple(tasks), tuple(policies), video=args.video, **recipe_of(args))
     out = Path(args.out or f"runs/table_{args.obs}")
     failed = runner.run(plan, out, jobs=args.jobs, backend=args.backend)
     command = "rmbench " + " ".join(shlex.quote(a) for a in sys.argv[1:])

@@ -64,11 +64,15 @@ class FeatureCache:
             self._open[key] = self._ensure(episode, camera)
         return self._open[key]
 
+    def missing(self, episodes: list[int], cameras: list[str]) -> list[tuple[int, str]]:
+        """The (episode, camera) pairs of ``episodes`` x ``cameras`` the cache lacks."""
+        return [(e, c) for e in episodes for c in cameras
+                if self._read(self.path(e, c), e) is None]
+
     def build(self, episodes: list[int], cameras: list[str]) -> None:
         """Encode whatever the cache lacks of ``episodes`` x ``cameras`` now (before training
         starts, so that data-loading workers only read); nothing is kept open."""
-        todo = [(e, c) for e in episodes for c in cameras
-                if self._read(self.path(e, c), e) is None]
+        todo = self.missing(episodes, cameras)
         for n, (e, c) in enumerate(todo):
             if n % 20 == 0:
                 log.info("%s: encoding %d of %d episode videos", self.dir, n + 1, len(todo))

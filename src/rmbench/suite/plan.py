@@ -11,12 +11,16 @@ out of M(1) rows, as in the published ablation table.
 Folders, per task under the table's ``OUT``::
 
     OUT/<task>/data                       the demonstrations (one dataset per task)
+    OUT/<task>/data-copies<N>-r<reach>    with ``rendered_copies``: them and their rendered
+                                          layout copies, what the policies train on
     OUT/<task>/train/<run>                a checkpoint, <run> named by spec, steps, batch, --set
+                                          (and the copies)
     OUT/<task>/eval/<run>-e<episodes>     its evaluation (the harness's folder)
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -153,6 +157,20 @@ def add_recipe_arguments(parser) -> None:
     parser.add_argument("--set", action="append", default=[], metavar="[POLICY.]FIELD=VALUE",
                         help="override every policy config that has the field, or POLICY's "
                              "alone (mem0.execute=20); VALUE as JSON; repeatable")
+    parser.add_argument("--rendered-copies", type=int, default=0, metavar="N",
+                        help="train on each demonstration and N rendered copies of it with the "
+                             "scene moved (`rmbench dataset copy-layouts`; the pixel track's "
+                             "counterpart of --set layout_copies)")
+    parser.add_argument("--rendered-reach", type=float, default=0.04, metavar="METRES",
+                        help="with --rendered-copies: the largest move along each table axis")
+
+
+def recipe_of(args) -> dict[str, Any]:
+    """``Plan``'s recipe fields from the options ``add_recipe_arguments`` added."""
+    return {"demos": args.demos, "steps": args.steps, "batch": args.batch,
+            "episodes": args.episodes, "noise": args.noise, "noise_kind": args.noise_kind,
+            "sets": tuple(args.set), "rendered_copies": args.rendered_copies,
+            "rendered_reach": args.rendered_reach}
 
 
 @dataclass(frozen=True)
@@ -176,6 +194,11 @@ class Plan:
     --set``), ``POLICY.FIELD=VALUE`` of one policy's (``mem0.execute=20``)."""
     video: str = "none"
     """The evaluation's videos (``rmbench eval --video``)."""
+    rendered_copies: int = 0
+    """Layout copies rendered of each demonstration (``data/layout_copies.py``): the policies
+    train on the demonstrations and these copies, each scene moved by up to ``rendered_reach``
+    metres in x and y. The state's ``--set layout_copies`` needs no rendering; pixels do."""
+    rendered_reach: float = 0.04
 
     def __post_init__(self):
         if self.obs not in OBSERVATIONS:
@@ -189,6 +212,10 @@ class Plan:
             parse_policy(spec)
         if min(self.demos, self.steps, self.batch, self.episodes) < 1:
             raise ValueError("demos, steps, batch and episodes must be >= 1")
+        if self.rendered_copies < 0 or not (math.isfinite(self.rendered_reach)
+                                            and self.rendered_reach > 0):
+            raise ValueError(f"rendered copies must be >= 0 and their reach a finite number "
+                             f"> 0, got {self.rendered_copies} and {self.rendered_reach}")
         NoiseSpec(self.noise_kind, self.noise)  # a bad kind or sigma: one line
         check_sets(self.sets)
         for spec in {trained_spec(s) for s in self.policies}:  # a config refusing a value
@@ -207,15 +234,24 @@ class Plan:
         return [(t, s) for t in order for s in self.policies if applies(s, get_task(t).tmc)]
 
     def data_dir(self, out: Path, task: str) -> Path:
+        """The task's demonstrations."""
         return Path(out) / task / "data"
 
+    def _copies_tag(self) -> str:
+        return f"-copies{self.rendered_copies}-r{self.rendered_reach:g}" if self.rendered_copies else ""
+
+    def train_data_dir(self, out: Path, task: str) -> Path:
+        """What the task's policies train on: the demonstrations, or with ``rendered_copies``
+        the dataset of them and their copies."""
+        return Path(out) / task / f"data{self._copies_tag()}"
+
     def train_dir(self, out: Path, task: str, spec: str) -> Path:
-        return Path(out) / task / "train" / run_name(trained_spec(spec), self.steps, self.batch,
-                                                     self.sets)
+        run = run_name(trained_spec(spec), self.steps, self.batch, self.sets)
+        return Path(out) / task / "train" / f"{run}{self._copies_tag()}"
 
     def eval_dir(self, out: Path, task: str, spec: str) -> Path:
         run = run_name(spec, self.steps, self.batch, self.sets)
-        return Path(out) / task / "eval" / f"{run}-e{self.episodes}"
+        return Path(out) / task / "eval" / f"{run}{self._copies_tag()}-e{self.episodes}"
 
     def eval_policy(self, out: Path, task: str, spec: str) -> str:
         """The ``--policy`` argument of the cell's evaluation."""

@@ -1,5 +1,7 @@
 """A table cell's three stages, each resumable and each a no-op once done: collect the task's
-demonstrations, train the cell's checkpoint, evaluate it. Wall times accumulate in each
+training data (its demonstrations; with ``rendered_copies`` their rendered layout copies; the
+frozen backbones' features, so that the training jobs beside each other only read them), train
+the cell's checkpoint, evaluate it. Wall times accumulate in each
 folder's ``timing.json`` over the calls that completed a stage's piece (a call killed midway
 loses its own time, not what it saved)."""
 
@@ -41,9 +43,49 @@ def add_time(folder: Path, key: str, seconds: float) -> None:
 
 
 # ------------------------------------------------------------------------------ done yet?
-def collected(plan: Plan, out: Path, task: str) -> bool:
+def demos_collected(plan: Plan, out: Path, task: str) -> bool:
     root = plan.data_dir(out, task)
     return (root / "meta" / "info.json").exists() and Dataset(root).num_episodes >= plan.demos
+
+
+def collected(plan: Plan, out: Path, task: str) -> bool:
+    """Whether the task's training data is complete: demonstrations, copies, features."""
+    if not demos_collected(plan, out, task):
+        return False
+    if plan.rendered_copies and copies_done(plan, out, task) is None:
+        return False
+    return not any(cache.missing(*wanted) for cache, wanted in feature_caches(plan, out, task))
+
+
+def copies_record(plan: Plan, out: Path, task: str) -> Path:
+    """Where a finished rendering of the copies leaves its summary (beside their dataset)."""
+    return plan.train_data_dir(out, task).with_name(plan.train_data_dir(out, task).name + ".json")
+
+
+def copies_done(plan: Plan, out: Path, task: str) -> dict | None:
+    """The rendered copies' summary once they are all written (of the plan's demonstrations),
+    else None."""
+    summary = read_json(copies_record(plan, out, task), None)
+    return summary if summary and summary.get("source_episodes") == plan.demos else None
+
+
+def feature_caches(plan: Plan, out: Path, task: str) -> list[tuple[Any, tuple[list, list]]]:
+    """Each frozen-backbone feature cache the plan's policies train from, with the (episodes,
+    cameras) they read: one per (backbone, stride, image size), shared by the policies."""
+    from rmbench.policies.feature_cache import FeatureCache
+
+    root = plan.train_data_dir(out, task)
+    configs = [config_for(trained_spec(s), plan.obs, plan.sets) for s in plan.policies]
+    configs = [c for c in configs if c.reads_features]
+    if not configs or not (root / "meta" / "info.json").exists():
+        return []
+    ds, caches = Dataset(root), {}
+    for c in configs:
+        key = (c.backbone, c.backbone_stride, tuple(c.image_size))
+        cameras = caches.get(key, (None, set()))[1] | set(c.cameras)
+        caches[key] = (FeatureCache(ds, *key), cameras)
+    return [(cache, (list(range(ds.num_episodes)), sorted(cams)))
+            for cache, cams in caches.values()]
 
 
 def trained(plan: Plan, out: Path, task: str, spec: str) -> bool:
@@ -82,21 +124,40 @@ def fraction(plan: Plan, out: Path, kind: str, task: str, spec: str = "") -> flo
 # ------------------------------------------------------------------------------- stages
 def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
                   progress: bool = False) -> dict[str, Any]:
-    """The task's demonstrations (continued where a previous call stopped); their summary."""
+    """The task's training data, each part continued where a previous call stopped: its
+    demonstrations, their rendered copies, the frozen backbones' features; their summary."""
+    from rmbench.data.layout_copies import copy_layouts
+
     cameras, (width, height) = COLLECT_CAMERAS[plan.obs]
     root = plan.data_dir(out, task)
-    if not collected(plan, out, task):
+    if not demos_collected(plan, out, task):
         t0 = time.perf_counter()
         collect(CollectConfig(task, root, episodes=plan.demos, seed=0, cameras=cameras,
                               width=width, height=height, workers=workers,
                               noise=NoiseSpec(plan.noise_kind, plan.noise), progress=progress))
         add_time(root.parent, "collect_wall_s", time.perf_counter() - t0)
-    ds = Dataset(root)
+    if plan.rendered_copies and copies_done(plan, out, task) is None:
+        t0 = time.perf_counter()
+        summary = copy_layouts(root, plan.train_data_dir(out, task), plan.rendered_copies,
+                               plan.rendered_reach, seed=0, episodes=plan.demos,
+                               workers=workers, progress=progress)
+        add_time(root.parent, "copies_wall_s", time.perf_counter() - t0)
+        write_atomic(copies_record(plan, out, task),
+                     (json.dumps(summary.to_dict(), indent=1) + "\n").encode())
+    for cache, wanted in feature_caches(plan, out, task):
+        if cache.missing(*wanted):
+            t0 = time.perf_counter()
+            cache.build(*wanted)
+            add_time(root.parent, "features_wall_s", time.perf_counter() - t0)
+    ds, timing = Dataset(root), read_json(root.parent / TIMING, {})
     return {"path": str(root), "episodes": ds.num_episodes, "frames": ds.num_frames,
             "cameras": list(ds.cameras), "resolution": f"{width}x{height}",
             "environment_state": ds.state_names is not None,
             "noise": NoiseSpec(plan.noise_kind, plan.noise).to_dict() if plan.noise else None,
-            "collect_wall_s": read_json(root.parent / TIMING, {}).get("collect_wall_s")}
+            "collect_wall_s": timing.get("collect_wall_s"),
+            "rendered_copies": copies_done(plan, out, task),
+            "copies_wall_s": timing.get("copies_wall_s"),
+            "features_wall_s": timing.get("features_wall_s")}
 
 
 def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = False) -> Path:
@@ -112,7 +173,7 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
                                 save_every=min(500, plan.steps))
         _, fit = trainable(parse_policy(spec)[0])
         t0 = time.perf_counter()
-        fit(plan.data_dir(out, task), folder, cfg, train_cfg, progress=progress)
+        fit(plan.train_data_dir(out, task), folder, cfg, train_cfg, progress=progress)
         add_time(folder, "train_wall_s", time.perf_counter() - t0)
     return folder
 
