@@ -189,6 +189,25 @@ def test_tables_mark_missing_and_absent_cells(tmp_path):
     assert stages.fraction(plan, tmp_path, "train", "put_back_block", "mem0") == 0.0
 
 
+def test_a_job_spends_its_share_of_the_cores(tmp_path, monkeypatch):
+    """A job given two threads collects and evaluates with two worker processes."""
+    from rmbench.suite.job import run_job, source_digest
+
+    seen = {}
+    monkeypatch.setattr(stages, "collect_stage", lambda *a, **kw: seen.update(collect=kw))
+    monkeypatch.setattr(stages, "eval_stage", lambda *a, **kw: seen.update(eval=kw))
+    plan = Plan("state", ("observe_and_pickup",), ("mem0",)).to_dict()
+    import torch
+
+    threads = torch.get_num_threads()  # run_job sets this process's: put it back
+    try:
+        for kind in ("collect", "eval"):
+            run_job(plan, str(tmp_path), kind, "observe_and_pickup", "mem0", 2, source_digest())
+    finally:
+        torch.set_num_threads(threads)
+    assert seen == {"collect": {"workers": 2}, "eval": {"workers": 2}}
+
+
 def test_rendered_copies_are_the_training_data_with_their_features_encoded_once(
         tmp_path, monkeypatch):
     """--rendered-copies: the collect job renders the copies and encodes the frozen backbone's

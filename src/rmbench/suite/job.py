@@ -44,12 +44,14 @@ def run_job(plan: dict, out: str, kind: str, task: str, spec: str, threads: int,
             f = stack.enter_context(open(log, "a"))
             stack.enter_context(contextlib.redirect_stdout(f))
             stack.enter_context(contextlib.redirect_stderr(f))
+        # a job's share of the cores: torch threads in training, worker processes in
+        # collection and evaluation (whose results do not depend on their number)
         if kind == "collect":
-            stages.collect_stage(p, out_dir, task)
+            stages.collect_stage(p, out_dir, task, workers=max(1, threads))
         elif kind == "train":
             stages.train_stage(p, out_dir, task, spec)
         else:
-            stages.eval_stage(p, out_dir, task, spec)
+            stages.eval_stage(p, out_dir, task, spec, workers=max(1, threads))
 
 
 def main(argv: list[str] | None = None) -> int:

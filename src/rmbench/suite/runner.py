@@ -3,8 +3,9 @@ its cells' training, a checkpoint before its evaluations), ``jobs`` at a time on
 processes or on Ray, with a progress grid across the whole table.
 
 Each job is a fresh process (``python -m rmbench.suite.job``) with ``cores / jobs`` torch
-threads and its own log in ``OUT/logs``; on Ray each is a task with one CPU, and ``OUT``
-must be a file system every node sees (the stages read and write their folders there). A
+threads (a collect or evaluation job: as many worker processes) and its own log in
+``OUT/logs``; on Ray each is a task with one CPU, and ``OUT`` must be a file system every
+node sees (the stages read and write their folders there). A
 job that fails is reported with its log and its dependants are skipped; the others go on.
 Interrupted (Ctrl-C, a killed session), the running jobs stop and what they saved stays:
 a re-run of the same command plans only what is missing.
