@@ -69,14 +69,16 @@ class FeatureCache:
         return [(e, c) for e in episodes for c in cameras
                 if self._read(self.path(e, c), e) is None]
 
-    def build(self, episodes: list[int], cameras: list[str]) -> None:
+    def build(self, episodes: list[int], cameras: list[str]) -> int:
         """Encode whatever the cache lacks of ``episodes`` x ``cameras`` now (before training
-        starts, so that data-loading workers only read); nothing is kept open."""
+        starts, so that data-loading workers only read); nothing is kept open. How many
+        episode videos it encoded."""
         todo = self.missing(episodes, cameras)
         for n, (e, c) in enumerate(todo):
             if n % 20 == 0:
                 log.info("%s: encoding %d of %d episode videos", self.dir, n + 1, len(todo))
             self._ensure(e, c)
+        return len(todo)
 
     def _ensure(self, episode: int, camera: str) -> np.ndarray:
         path = self.path(episode, camera)

@@ -59,7 +59,8 @@ def collected(plan: Plan, out: Path, task: str) -> bool:
 
 def copies_record(plan: Plan, out: Path, task: str) -> Path:
     """Where a finished rendering of the copies leaves its summary (beside their dataset)."""
-    return plan.train_data_dir(out, task).with_name(plan.train_data_dir(out, task).name + ".json")
+    data = plan.train_data_dir(out, task)
+    return data.with_name(data.name + ".json")
 
 
 def copies_done(plan: Plan, out: Path, task: str) -> dict | None:
@@ -75,17 +76,17 @@ def feature_caches(plan: Plan, out: Path, task: str) -> list[tuple[Any, tuple[li
     from rmbench.policies.feature_cache import FeatureCache
 
     root = plan.train_data_dir(out, task)
-    configs = [config_for(trained_spec(s), plan.obs, plan.sets) for s in plan.policies]
-    configs = [c for c in configs if c.reads_features]
-    if not configs or not (root / "meta" / "info.json").exists():
+    cameras: dict[tuple, set[str]] = {}  # (backbone, stride, image size) -> cameras read
+    for spec in {trained_spec(s) for s in plan.policies}:
+        c = config_for(spec, plan.obs, plan.sets)
+        if c.reads_features:
+            cameras.setdefault((c.backbone, c.backbone_stride, tuple(c.image_size)),
+                               set()).update(c.cameras)
+    if not cameras or not (root / "meta" / "info.json").exists():
         return []
-    ds, caches = Dataset(root), {}
-    for c in configs:
-        key = (c.backbone, c.backbone_stride, tuple(c.image_size))
-        cameras = caches.get(key, (None, set()))[1] | set(c.cameras)
-        caches[key] = (FeatureCache(ds, *key), cameras)
-    return [(cache, (list(range(ds.num_episodes)), sorted(cams)))
-            for cache, cams in caches.values()]
+    ds = Dataset(root)
+    return [(FeatureCache(ds, *key), (list(range(ds.num_episodes)), sorted(cams)))
+            for key, cams in cameras.items()]
 
 
 def trained(plan: Plan, out: Path, task: str, spec: str) -> bool:
@@ -145,9 +146,8 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
         write_atomic(copies_record(plan, out, task),
                      (json.dumps(summary.to_dict(), indent=1) + "\n").encode())
     for cache, wanted in feature_caches(plan, out, task):
-        if cache.missing(*wanted):
-            t0 = time.perf_counter()
-            cache.build(*wanted)
+        t0 = time.perf_counter()
+        if cache.build(*wanted):
             add_time(root.parent, "features_wall_s", time.perf_counter() - t0)
     ds, timing = Dataset(root), read_json(root.parent / TIMING, {})
     return {"path": str(root), "episodes": ds.num_episodes, "frames": ds.num_frames,
