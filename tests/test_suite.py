@@ -189,6 +189,32 @@ def test_tables_mark_missing_and_absent_cells(tmp_path):
     assert stages.fraction(plan, tmp_path, "train", "put_back_block", "mem0") == 0.0
 
 
+def test_progress_in_a_log_shows_a_training_between_its_start_and_end(tmp_path):
+    """Off a terminal the grid is printed at each event and, between events, when it changed
+    at most every every_s: before, a log showed "train 0%" for the hour a training ran."""
+    import io
+
+    plan = Plan("state", ("put_back_block",), ("mem0",), steps=100)
+    curve = plan.train_dir(tmp_path, "put_back_block", "mem0") / stages.CURVE_CSV
+    curve.parent.mkdir(parents=True)
+    running = {runner.Job("train", "put_back_block", "mem0")}
+    log = io.StringIO()
+    progress = runner.Progress(plan, tmp_path, stream=log, every_s=0.0)
+    progress.show(running, {}, "started train put_back_block mem0")
+    assert "started train" in log.getvalue() and "train 0%" in log.getvalue()
+    progress.show(running, {})  # nothing changed: nothing printed
+    assert log.getvalue().count("rmbench table") == 1
+    curve.write_text("step,loss\n40,0.5\n")
+    progress.show(running, {})
+    assert log.getvalue().count("rmbench table") == 2 and "train 40%" in log.getvalue()
+    quiet = io.StringIO()
+    progress = runner.Progress(plan, tmp_path, stream=quiet, every_s=3600.0)
+    progress.show(running, {}, "started")
+    curve.write_text("step,loss\n80,0.5\n")
+    progress.show(running, {})  # changed, but within every_s of the last print
+    assert quiet.getvalue().count("rmbench table") == 1
+
+
 def test_a_job_spends_its_share_of_the_cores(tmp_path, monkeypatch):
     """A job given two threads collects and evaluates with two worker processes."""
     from rmbench.suite.job import run_job, source_digest

@@ -158,14 +158,18 @@ def column(spec: str) -> str:
 
 class Progress:
     """The table as a grid of cell states (waiting, collecting, training n%, evaluating n%,
-    the success rate, failed), redrawn in place on a terminal, printed on each change
-    otherwise."""
+    the success rate, failed), redrawn in place on a terminal; otherwise (a log file)
+    printed at each job's start and end, and between them when it changed, at most every
+    ``every_s`` seconds, so that an hour-long training shows its progress in the log
+    without a line per poll."""
 
-    def __init__(self, plan: Plan, out: Path, stream: TextIO | None = None):
+    def __init__(self, plan: Plan, out: Path, stream: TextIO | None = None,
+                 every_s: float = 300.0):
         self.plan, self.out = plan, out
         self.stream = stream if stream is not None else sys.stderr
         self.tty = self.stream.isatty()
-        self.start = time.monotonic()
+        self.every_s = every_s
+        self.start = self.printed = time.monotonic()
         self.last = ""
 
     def cell(self, task: str, spec: str, running: set[Job], failed: dict[Job, str]) -> str:
@@ -202,11 +206,13 @@ class Progress:
 
     def show(self, running: set[Job], failed: dict[Job, str], event: str = "") -> None:
         text = self.render(running, failed)
+        now = time.monotonic()
         if self.tty:
             if text != self.last:
                 self.stream.write("\x1b[H\x1b[2J" + text + "\n")
-        elif event:
-            self.stream.write(f"{event}\n{text}\n")
+        elif event or (text != self.last and now - self.printed >= self.every_s):
+            self.stream.write(f"{event}\n{text}\n" if event else f"{text}\n")
+            self.printed = now
         self.stream.flush()
         self.last = text
 
