@@ -3,6 +3,7 @@ folders, the jobs a table still needs, a toy table end to end (resumed, a corrup
 failing its cell alone) and the tables it writes."""
 
 import importlib.util
+import io
 import json
 from pathlib import Path
 
@@ -192,8 +193,6 @@ def test_tables_mark_missing_and_absent_cells(tmp_path):
 def test_progress_in_a_log_shows_a_training_between_its_start_and_end(tmp_path):
     """Off a terminal the grid is printed at each event and, between events, when it changed
     at most every every_s: before, a log showed "train 0%" for the hour a training ran."""
-    import io
-
     plan = Plan("state", ("put_back_block",), ("mem0",), steps=100)
     curve = plan.train_dir(tmp_path, "put_back_block", "mem0") / stages.CURVE_CSV
     curve.parent.mkdir(parents=True)

@@ -170,7 +170,7 @@ class Progress:
         self.tty = self.stream.isatty()
         self.every_s = every_s
         self.start = self.printed = time.monotonic()
-        self.last = ""
+        self.last = ""  # the last grid shown, without its clock
 
     def cell(self, task: str, spec: str, running: set[Job], failed: dict[Job, str]) -> str:
         plan, out = self.plan, self.out
@@ -188,15 +188,21 @@ class Progress:
             return f"data {stages.fraction(plan, out, 'collect', task):.0%}"
         return "."
 
+    def _with_clock(self, grid: str) -> str:
+        """``grid`` with the time since the table started at the end of its first line."""
+        elapsed = int(time.monotonic() - self.start)
+        head, _, rest = grid.partition("\n")
+        return (f"{head}, {elapsed // 3600}:{elapsed // 60 % 60:02d}:{elapsed % 60:02d}\n"
+                f"{rest}")
+
     def render(self, running: set[Job], failed: dict[Job, str]) -> str:
+        """The grid, without the clock."""
         cells = self.plan.cells()
         specs = list(self.plan.policies)
         grid = {(t, s): self.cell(t, s, running, failed) for t, s in cells}
         finished = sum(v.endswith("%") and " " not in v for v in grid.values())
-        elapsed = int(time.monotonic() - self.start)
         head = (f"rmbench table ({self.plan.obs}): {finished}/{len(cells)} cells evaluated, "
-                f"{len(running)} running, {len(failed)} failed, "
-                f"{elapsed // 3600}:{elapsed // 60 % 60:02d}:{elapsed % 60:02d}")
+                f"{len(running)} running, {len(failed)} failed")
         width = {s: max(len(column(s)), 9) for s in specs}
         lines = [head, f"{'task':<19}" + " ".join(f"{column(s):>{width[s]}}" for s in specs)]
         for task in dict.fromkeys(t for t, _ in cells):
@@ -205,16 +211,16 @@ class Progress:
         return "\n".join(lines)
 
     def show(self, running: set[Job], failed: dict[Job, str], event: str = "") -> None:
-        text = self.render(running, failed)
-        now = time.monotonic()
-        if self.tty:
-            if text != self.last:
-                self.stream.write("\x1b[H\x1b[2J" + text + "\n")
-        elif event or (text != self.last and now - self.printed >= self.every_s):
+        grid = self.render(running, failed)
+        text, now = self._with_clock(grid), time.monotonic()
+        if self.tty:  # redrawn each poll: the clock moves
+            self.stream.write("\x1b[H\x1b[2J" + text + "\n")
+        elif event or (grid != self.last and now - self.printed >= self.every_s):
+            # a log: the clock alone changing is not news
             self.stream.write(f"{event}\n{text}\n" if event else f"{text}\n")
             self.printed = now
         self.stream.flush()
-        self.last = text
+        self.last = grid
 
 
 # ------------------------------------------------------------------------------ the loop
