@@ -159,6 +159,29 @@ def test_a_corrupt_checkpoint_fails_its_cell_alone(toy_table, tmp_path, capsys):
     assert "eval observe_and_pickup mem0" in res["failed"]
 
 
+def test_report_only_writes_the_whole_table_from_cells_run_apart(toy_table, tmp_path, capsys):
+    import shutil
+
+    out, args = toy_table
+    copy = tmp_path / "table"
+    shutil.copytree(out, copy)
+    # the table widened to a column and a task not run: reported, nothing trained for them
+    wide = [a if a != str(out) else str(copy) for a in args]
+    wide[wide.index("--policies") + 1] = "mem0,dp,mem0:no_memory"
+    wide[wide.index("--tasks") + 1] = "observe_and_pickup,swap_T"
+    assert cli([*wide, "--report-only"]) == 0
+    assert "jobs to run" not in capsys.readouterr().err
+    res = json.loads((copy / "table.json").read_text())
+    cells = res["cells"]["observe_and_pickup"]
+    assert cells["mem0"]["episodes"] == 1 and cells["dp"]["episodes"] == 1
+    assert cells["mem0:no_memory"] is None and res["cells"]["swap_T"]["mem0"] is None
+    assert not (copy / "swap_T").exists()
+    assert not any("no_memory" in p.name for p in (copy / "observe_and_pickup" / "train").iterdir())
+    assert "| swap_T | M(1) | — | — |" in (copy / "table.md").read_text()
+    with pytest.raises(SystemExit, match="no table at"):
+        cli([*[a if a != str(out) else str(tmp_path / "none") for a in args], "--report-only"])
+
+
 def test_learning_benchmark_is_the_table_for_one_task(toy_table, tmp_path):
     """benchmarks/learning.py with the toy table's settings finds its cells done and writes its
     results file from them."""
