@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from rmbench.eval import EvalConfig, EvalError, evaluate
+from rmbench.eval.events import Events
 from rmbench.eval.harness import read_records
 from rmbench.policies import BasePolicy, UnknownPolicyError, register_policy
 from tests.conftest import DATA_TASK as TASK
@@ -57,8 +58,25 @@ def test_expert_solves_verified_seeds_and_records_everything(tmp_path):
     assert recs[0]["video"] == "videos/seed-100000.mp4" and recs[1]["video"] is None
     assert (tmp_path / "out" / TASK / recs[0]["video"]).stat().st_size > 1000
     assert "| observe_and_pickup | M(1) | 3 | 100.0% |" in (tmp_path / "out" / "summary.md").read_text()
+    # the events: each subtask's start, in order, and the task's facts where they changed
+    subtasks = [(step, v) for step, source, key, v in recs[0]["events"] if key == "subtask"]
+    assert subtasks[0] == (0, "watch the reference object") and subtasks[-1][1] == "done"
+    assert subtasks[-1][0] == recs[0]["steps"] and [s for s, _ in subtasks] == sorted(s for s, _ in subtasks)
+    assert [0, "task", "screen_up", False] in recs[0]["events"]
     cache = json.loads(next((tmp_path / "seeds").glob("*.json")).read_text())
     assert cache["verified"][:3] == [100000, 100001, 100002]
+
+
+def test_events_keep_discrete_changes_only_and_count_what_the_limit_leaves_out():
+    ev = Events(limit=3)
+    ev.update(0, "task", {"lamp": "off", "lift": 0.0, "row": (np.int64(0), 1)})
+    ev.update(1, "task", {"lamp": "off", "lift": 0.5, "row": [0, 1]})
+    ev.update(2, "task", {"lamp": "red"})
+    ev.update(2, "policy", {"subtask": "swap"})
+    ev.update(3, "task", {"lamp": "off"})
+    assert ev.to_list() == [[0, "task", "lamp", "off"], [0, "task", "row", [0, 1]],
+                            [2, "task", "lamp", "red"], [None, "events", "left_out", 2]]
+    assert json.loads(json.dumps(ev.to_list())) == ev.to_list()
 
 
 def test_policy_errors_are_recorded_and_the_evaluation_goes_on(tmp_path):

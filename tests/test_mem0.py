@@ -294,6 +294,10 @@ def test_mem0_through_the_evaluation_harness(mn_ckpt, tmp_path):
         rec.pop("wall_s")
         out.append(rec)
     assert out[0] == out[1] and out[0]["reason"] != "policy_error", out[0]
+    # its status, the subtask it is on, is recorded from the first step: the planner's choice
+    texts = json.loads((mn_ckpt / "config.json").read_text())["executor_texts"]
+    first = next(e for e in out[0]["events"] if e[1] == "policy")
+    assert first[:3] == [0, "policy", "subtask"] and first[3] in texts
 
 
 def test_train_cli_errors(mn_dataset, tmp_path, capsys):

@@ -115,7 +115,7 @@ class RMBenchEnv(gym.Env):
         plan = task.plan()
         info = {**self.spec_info, "instruction": self.instruction, "plan": plan,
                 "hidden": task.hidden_state(), "progress": self._last.progress,
-                **self._subtask_info(self._last, ended=False)}
+                "predicates": self._last.predicates, **self._subtask_info(self._last, ended=False)}
         return self._observation(), info
 
     def step(self, action):

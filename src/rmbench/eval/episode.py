@@ -1,7 +1,9 @@
 """One evaluation episode of a policy: until success, task failure or the step limit.
 
 Whatever the policy does wrong (raises, returns NaN or a wrong shape) ends the episode as
-``policy_error`` with the message; it never stops the evaluation.
+``policy_error`` with the message; it never stops the evaluation. The record keeps the
+episode's events (``eval/events.py``): when the task's subtask and discrete facts changed,
+and the policy's own status where it reports one (``status()``: a Mem-0's subtask).
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from rmbench.eval.events import Events
 from rmbench.sim.simulator import ACTION_DIM
 from rmbench.video import PREVIEW_CODEC, Mp4Encoder
 
@@ -41,6 +44,9 @@ def run_policy_episode(env, policy, seed: int, video: bool = False) -> dict[str,
         encoder.add(env.render())
     best, steps, reason, message, success = float(info["progress"]), 0, "timeout", "", False
     queue: list[np.ndarray] = []
+    events = Events()
+    events.update(0, "task", {"subtask": info["subtask"], **info["predicates"]})
+    status = getattr(policy, "status", dict)
     try:
         policy.reset(info["instruction"], task_info)
     except Exception as err:
@@ -50,11 +56,14 @@ def run_policy_episode(env, policy, seed: int, video: bool = False) -> dict[str,
         if not queue:
             try:
                 queue = list(as_chunk(policy.act(obs)))
+                events.update(steps, "policy", status())
             except Exception as err:
                 reason, message = "policy_error", f"{type(err).__name__}: {err}"
                 break
         obs, _, terminated, truncated, info = env.step(queue.pop(0))
         steps += 1
+        events.update(steps, "task", {"subtask": info.get("subtask", ""),
+                                      **info.get("predicates", {})})
         best = max(best, float(info["progress"]))
         if encoder:
             encoder.add(env.render())
@@ -70,5 +79,5 @@ def run_policy_episode(env, policy, seed: int, video: bool = False) -> dict[str,
     return {"task": type(u.task).name, "seed": seed, "success": success,
             "progress": round(best, 6), "steps": steps, "step_limit": u.step_limit,
             "reason": reason, "message": message, "instruction": task_info["instruction"],
-            "wall_s": round(time.perf_counter() - t0, 3),
+            "wall_s": round(time.perf_counter() - t0, 3), "events": events.to_list(),
             "video": encoder.finish() if encoder else None}

@@ -3,7 +3,8 @@
 A policy is reset with the episode's instruction and task facts, then asked for actions:
 ``act(observation)`` returns one 14-d action or a chunk (k, 14) that the caller executes in
 order before asking again. ``cameras`` says which camera images it reads (none: the
-environment may skip rendering).
+environment may skip rendering). A policy may also report ``status()``, a dict of what it
+currently believes (a Mem-0's subtask), which evaluation records whenever it changes.
 """
 
 from __future__ import annotations
@@ -32,6 +33,9 @@ class BasePolicy:
 
     def act(self, observation: dict[str, Any]) -> np.ndarray:
         raise NotImplementedError
+
+    def status(self) -> dict[str, Any]:
+        return {}
 
     def close(self) -> None:
         pass

@@ -133,6 +133,10 @@ class Mem0Policy(BasePolicy):
         self.t += 1
         return action
 
+    def status(self) -> dict[str, Any]:
+        """The subtask the executor is on (an M(n) task's planner choice; the goal on M(1))."""
+        return {"subtask": self.describe["executor_texts"][self.subtask]}
+
     # ------------------------------------------------------------------ helpers
     def chunk(self, c: torch.Tensor, observation: dict[str, Any], length: int) -> np.ndarray:
         """The first ``length`` joint targets of a chunk sampled from context c."""

@@ -1,0 +1,58 @@
+"""An episode's events: the steps at which the task's discrete facts and the policy's own
+status changed, kept in the episode's record.
+
+An ending says how an episode failed; its events say where the failure began. On
+blocks_ranking_try, a Mem-0 whose subtask turns to a swap with no press recorded before it
+has trusted a false subtask end. Only discrete values are followed (a float such as a lift
+height changes every step), and an episode keeps at most ``LIMIT`` events, with the number
+left out as its last entry.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+LIMIT = 400
+
+
+def plain(value: Any) -> Any:
+    """``value`` as JSON writes it: numpy scalars and arrays, tuples and nested lists made plain."""
+    if isinstance(value, np.ndarray):
+        return plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    return value
+
+
+class Events:
+    """``[step, source, key, value]`` for each change of a followed value; ``step`` is the
+    number of environment steps taken when the change was seen."""
+
+    def __init__(self, limit: int = LIMIT):
+        self.limit = limit
+        self.items: list[list] = []
+        self.left_out = 0
+        self._last: dict[tuple[str, str], Any] = {}
+
+    def update(self, step: int, source: str, values: dict[str, Any]) -> None:
+        for key, value in values.items():
+            value = plain(value)
+            if isinstance(value, float):
+                continue
+            if (source, key) in self._last and self._last[source, key] == value:
+                continue
+            self._last[source, key] = value
+            if len(self.items) < self.limit:
+                self.items.append([step, source, key, value])
+            else:
+                self.left_out += 1
+
+    def to_list(self) -> list[list]:
+        tail = [[None, "events", "left_out", self.left_out]] if self.left_out else []
+        return self.items + tail
