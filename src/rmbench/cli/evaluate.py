@@ -71,7 +71,7 @@ def cmd_table(args) -> int:
         # a table built a few cells at a time (calls narrowed with --tasks and --policies)
         # is reported whole from what its folder holds
         if not out.is_dir():
-            raise SystemExit(f"rmbench: no table at {out} (--report-only runs nothing)")
+            raise ValueError(f"no table at {out} (--report-only runs nothing)")
         failed = {}
     else:
         failed = runner.run(plan, out, jobs=args.jobs, backend=args.backend)
