@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import shutil
 import tempfile
 import time
@@ -26,6 +24,7 @@ from rmbench.data import CollectConfig, collect
 from rmbench.data.record import run_expert
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
+from rmbench.machine import describe
 
 
 def folder_mb(path: Path) -> float:
@@ -89,8 +88,7 @@ def main() -> None:
         "benchmark": "collect_speed", "task": args.task, "cameras": 3, "resolution": "320x240",
         "baseline_successes": base_ok, "rows": rows,
         "time_for_50_demos_s": round(50 * pool["wall_s"] / pool["episodes"], 1),
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version()},
+        "machine": describe(),
     }
     print(f"{'run':<46} {'workers':>7} {'demos':>5} {'wall s':>8} {'demos/min':>9} "
           f"{'overhead':>8} {'MB/demo':>8}")

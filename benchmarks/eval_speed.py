@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import tempfile
 import time
 from pathlib import Path
@@ -25,6 +23,7 @@ import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.envs.registration import make
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.harness import read_records
+from rmbench.machine import describe
 from rmbench.seeds import eval_seed_start
 
 
@@ -87,8 +86,7 @@ def main() -> None:
     ratio = rows[1]["steps_per_s"] / rows[0]["steps_per_s"]
     result = {"benchmark": "eval_speed", "task": args.task, "episodes": args.episodes,
               "rows": rows, "harness_vs_bare": round(ratio, 3),
-              "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                          "python": platform.python_version()}}
+              "machine": describe()}
     print(f"{'run':<26} {'workers':>7} {'steps':>6} {'wall s':>7} {'steps/s':>8} {'episodes/h':>10}")
     for r in rows:
         print(f"{r['run']:<26} {r['workers']:>7} {r['steps']:>6} {r['wall_s']:>7.1f} "

@@ -45,13 +45,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import shlex
 import sys
 from pathlib import Path
 
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.eval.episode import ENDINGS
+from rmbench.machine import describe
 from rmbench.suite import runner, stages
 from rmbench.suite.plan import Plan, add_recipe_arguments, recipe_of
 from rmbench.tasks import get_task
@@ -116,8 +116,7 @@ def main(argv: list[str] | None = None) -> int:
               "demos": args.demos, "steps": args.steps, "batch": args.batch, "set": args.set,
               "episodes": args.episodes, "noise": plan_noise(plan),
               "dataset": stages.collect_stage(plan, out, task.name), "policies": rows,
-              "machine": {"cpu": platform.processor() or platform.machine(),
-                          "cores": os.cpu_count(), "jobs": args.jobs,
+              "machine": {**describe(), "jobs": args.jobs,
                           "torch_threads": max(1, (os.cpu_count() or 1) // args.jobs)}}
     results_path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(results_path, (json.dumps(result, indent=1) + "\n").encode())

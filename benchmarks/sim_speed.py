@@ -11,12 +11,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import time
 from pathlib import Path
 
 import rmbench  # before anything imports mujoco: it picks the OpenGL backend
 from rmbench.experts import make_expert
+from rmbench.machine import describe
 from rmbench.sim.simulator import data_renderer
 
 
@@ -86,7 +86,7 @@ def main() -> None:
         "bare_render_sets_per_s": round(bare, 1),
         "ratio_env_to_bare_render": round(env_render / bare, 3),
         "env_steps_per_s_physics_only": round(physics, 1),
-        "machine": {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count()},
+        "machine": describe(),
     }
     rows = [("env step, 3 cameras rendered", f"{env_render:8.1f} steps/s"),
             ("bare MuJoCo render, same 3 cameras", f"{bare:8.1f} sets/s"),

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from rmbench.cli.main import main as cli
+from rmbench.machine import describe, short
 from rmbench.suite import runner, stages, tables
 from rmbench.suite.plan import (
     Plan,
@@ -120,8 +121,11 @@ def test_toy_table_end_to_end_and_resumed(toy_table, capsys):
     assert set(cells) == {"mem0", "dp"}
     for row in cells.values():
         assert row["episodes"] == 1 and 0 <= row["success_rate"] <= 1 and row["train_wall_s"] > 0
+        # each wall time says where it was measured: this machine, once
+        assert row["machines"] == {"train": [describe()], "eval": [describe()]}
     text = (out / "table.md").read_text()
     assert "| observe_and_pickup | M(1) |" in text and "(published)" in text
+    assert f"stages ran on {short(describe())}." in text
     # each task's chance level beside the published numbers, and what it assumes
     assert "chance (no memory) |" in text and "- observe_and_pickup: 24.0%" in text
     assert res["chance"]["observe_and_pickup"]["rate"] == pytest.approx(0.24, abs=0.01)
@@ -358,3 +362,15 @@ def test_a_terminated_table_stops_its_jobs(toy_table, tmp_path):
             proc.wait()
         for pid in jobs():
             os.kill(int(pid), signal.SIGKILL)
+
+
+def test_a_stage_resumed_on_another_machine_lists_both(tmp_path, monkeypatch):
+    stages.add_time(tmp_path, "train_wall_s", 60.0)
+    stages.add_time(tmp_path, "train_wall_s", 30.0)  # resumed on the same machine: listed once
+    here = describe()
+    other = {**here, "isa": "avx512f"}
+    monkeypatch.setattr(stages, "describe", lambda: other)
+    stages.add_time(tmp_path, "train_wall_s", 10.0)
+    timing = stages.read_json(tmp_path / stages.TIMING, {})
+    assert timing == {"train_wall_s": 100.0, "machines": [here, other]}
+

@@ -3,7 +3,7 @@ training data (its demonstrations; with ``rendered_copies`` their rendered layou
 frozen backbones' features, so that the training jobs beside each other only read them), train
 the cell's checkpoint, evaluate it. Wall times accumulate in each
 folder's ``timing.json`` over the calls that completed a stage's piece (a call killed midway
-loses its own time, not what it saved)."""
+loses its own time, not what it saved), with the machines those calls ran on."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from rmbench.data.reader import Dataset
 from rmbench.envs.noise import NoiseSpec
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.harness import read_records
+from rmbench.machine import describe
 from rmbench.suite.plan import COLLECT_CAMERAS, Plan, config_for, memory_of, parse_policy, trained_spec
 from rmbench.tasks import get_task
 from rmbench.training.loop import CURVE_CSV, TrainConfig
@@ -34,10 +35,14 @@ def read_json(path: Path, default):
 
 
 def add_time(folder: Path, key: str, seconds: float) -> None:
-    """Accumulate a stage's wall time in ``folder/timing.json``."""
+    """Accumulate a stage's wall time in ``folder/timing.json``, and the machine it ran on in
+    ``machines`` (each machine that added time once: a training resumed elsewhere lists two)."""
     path = Path(folder) / TIMING
     timing = read_json(path, {})
     timing[key] = round(timing.get(key, 0.0) + seconds, 1)
+    machines = timing.setdefault("machines", [])
+    if (here := describe()) not in machines:
+        machines.append(here)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, (json.dumps(timing, indent=1) + "\n").encode())
 
@@ -204,17 +209,21 @@ def failure_reasons(records: Path) -> dict[str, int]:
 
 
 def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | None:
-    """A finished cell's row (success rate, progress, endings, failure reasons, wall times,
-    its memory in words, its folders), or None while it is not evaluated."""
+    """A finished cell's row (success rate, progress, endings, failure reasons, wall times and
+    the machines they were measured on, its memory in words, its folders), or None while it
+    is not evaluated."""
     result = evaluated(plan, out, task, spec)
     if result is None:
         return None
     ckpt, evals = plan.train_dir(out, task, spec), plan.eval_dir(out, task, spec)
+    train_timing, eval_timing = read_json(ckpt / TIMING, {}), read_json(evals / TIMING, {})
     cfg = config_for(trained_spec(spec), plan.obs, plan.sets)
     return {"success_rate": result["success_rate"], "mean_progress": result["mean_progress"],
             "episodes": result["episodes"], "endings": result["endings"],
             "failure_reasons": failure_reasons(evals / task / "episodes.jsonl"),
-            "train_wall_s": read_json(ckpt / TIMING, {}).get("train_wall_s"),
-            "eval_wall_s": read_json(evals / TIMING, {}).get("eval_wall_s"),
+            "train_wall_s": train_timing.get("train_wall_s"),
+            "eval_wall_s": eval_timing.get("eval_wall_s"),
+            "machines": {"train": train_timing.get("machines", []),
+                         "eval": eval_timing.get("machines", [])},
             "memory": memory_of(spec, get_task(task).tmc, cfg), "checkpoint": str(ckpt),
             "evaluation": str(evals)}

@@ -6,14 +6,13 @@ evaluated yet reads "—" and keeps its group's average empty."""
 from __future__ import annotations
 
 import json
-import os
-import platform
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 from rmbench.eval.chance import chance
 from rmbench.eval.report import PUBLISHED, table
+from rmbench.machine import describe, short
 from rmbench.suite.plan import Plan, applies
 from rmbench.suite.runner import column
 from rmbench.suite.stages import TIMING, cell_row, read_json
@@ -42,8 +41,7 @@ def results(plan: Plan, out: Path, command: str = "",
             "failed": failed or {},
             "wall_s": {"table": read_json(Path(out) / TIMING, {}).get("table_wall_s"),
                        "collect": collect},
-            "machine": {"cpu": platform.processor() or platform.machine(),
-                        "cores": os.cpu_count(), "platform": platform.platform()}}
+            "machine": describe()}
 
 
 def _columns(res: dict[str, Any], specs: tuple[str, ...]) -> list[str]:
@@ -91,8 +89,10 @@ def markdown(res: dict[str, Any]) -> str:
     lines += ["", "## Progress (mean of each episode's best, %)", ""]
     lines += _markdown_table(res, list(plan["policies"]), metric="mean_progress")
     wall = res["wall_s"]
-    lines += ["", f"Wall time: {wall['table'] or 0:.0f} s for the table's runs "
-              f"({res['machine']['cores']} cores, {res['machine']['cpu']}).", ""]
+    machines = {short(m) for row in res["cells"].values() for cell in row.values() if cell
+                for stage in cell.get("machines", {}).values() for m in stage}
+    lines += ["", f"Wall time: {wall['table'] or 0:.0f} s for the table's runs; the cells' "
+              f"stages ran on {'; '.join(sorted(machines)) or short(res['machine'])}.", ""]
     if res["failed"]:
         lines += ["Failed in the last run: " + "; ".join(f"{k}: {v}" for k, v in res["failed"].items()), ""]
     return "\n".join(lines)
