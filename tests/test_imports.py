@@ -21,7 +21,7 @@ ROOT = "rmbench"
 # is left out.
 LAYERS: list[set[str]] = [
     # utilities that import no other rmbench module, but for parallel's check of the source
-    {"identity", "seeds", "video", "source", "parallel"},
+    {"identity", "seeds", "video", "source", "parallel", "machine"},
     {"sim"},  # MuJoCo station, robot, objects, rendering backend
     {"tasks"},  # task definitions over the simulator
     {"envs", "experts"},  # the gymnasium env, and the scripted experts beside it
