@@ -51,6 +51,12 @@ def test_policy_specs_and_their_columns():
         Plan("depth", ("press_button",))
     with pytest.raises(Exception, match="unknown task"):
         Plan("state", ("no_such_task",))
+    # where the cells train names no folder: a run started on a GPU is the same cell
+    on_gpu = Plan("state", ("press_button",), ("mem0",), device="cuda:0")
+    assert on_gpu.train_dir(out, task, "mem0") == Plan("state", ("press_button",)).train_dir(
+        out, task, "mem0")
+    with pytest.raises(ValueError, match="device must be"):
+        Plan("state", ("press_button",), device="gpu")
 
 
 def test_set_reaches_only_the_configs_with_the_field():
@@ -373,4 +379,12 @@ def test_a_stage_resumed_on_another_machine_lists_both(tmp_path, monkeypatch):
     stages.add_time(tmp_path, "train_wall_s", 10.0)
     timing = stages.read_json(tmp_path / stages.TIMING, {})
     assert timing == {"train_wall_s": 100.0, "machines": [here, other]}
+
+
+def test_a_training_on_a_gpu_names_it(tmp_path):
+    stages.add_time(tmp_path, "train_wall_s", 5.0, gpu="NVIDIA H100 80GB HBM3")
+    (machine,) = stages.read_json(tmp_path / stages.TIMING, {})["machines"]
+    assert machine == {**describe(), "gpu": "NVIDIA H100 80GB HBM3"}
+    assert short(machine) == f"{short(describe())}, NVIDIA H100 80GB HBM3"
+    assert stages.gpu_name("cpu") is None
 

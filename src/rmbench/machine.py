@@ -52,5 +52,6 @@ def describe(cpuinfo: str | None = None) -> dict[str, object]:
 
 
 def short(machine: dict[str, object]) -> str:
-    """One machine in a few words: ``AMD EPYC, 2 cores, avx2``."""
-    return f"{machine.get('cpu')}, {machine.get('cores')} cores, {machine.get('isa')}"
+    """One machine in a few words: ``AMD EPYC, 2 cores, avx2`` (``, NVIDIA H100`` with a GPU)."""
+    gpu = f", {machine['gpu']}" if machine.get("gpu") else ""
+    return f"{machine.get('cpu')}, {machine.get('cores')} cores, {machine.get('isa')}{gpu}"

@@ -65,7 +65,8 @@ def cmd_table(args) -> int:
     tasks = ([t.name for t in ordered()] if args.tasks == "all"
              else [t.strip() for t in args.tasks.split(",") if t.strip()])
     policies = [p.strip() for p in (args.policies or ",".join(ALL_POLICIES)).split(",") if p.strip()]
-    plan = Plan(args.obs, tuple(tasks), tuple(policies), video=args.video, **recipe_of(args))
+    plan = Plan(args.obs, tuple(tasks), tuple(policies), video=args.video, device=args.device,
+                **recipe_of(args))
     out = Path(args.out or f"runs/table_{args.obs}")
     if args.report_only:
         # a table built a few cells at a time (calls narrowed with --tasks and --policies)
@@ -143,6 +144,9 @@ def add_parsers(sub) -> None:
                         "no_key and gt_classifier on M(n) tasks only)")
     add_recipe_arguments(p)
     p.add_argument("--video", default="none", help="evaluation videos: first:K, failures, none")
+    p.add_argument("--device", default="cpu",
+                   help="where the cells train: cpu | cuda | cuda:N (a run started on a GPU "
+                        "resumes on a CPU; collection and evaluation stay on the CPU)")
     p.add_argument("--out", default=None, help="the table's folder (default runs/table_<obs>)")
     p.add_argument("--jobs", type=int, default=1,
                    help="jobs at once (local: each a process with cores/jobs torch threads)")

@@ -194,6 +194,10 @@ class Plan:
     --set``), ``POLICY.FIELD=VALUE`` of one policy's (``mem0.execute=20``)."""
     video: str = "none"
     """The evaluation's videos (``rmbench eval --video``)."""
+    device: str = "cpu"
+    """Where the cells train (cpu, cuda, cuda:N). Like ``video``, not part of any folder's
+    name: a checkpoint is the same run wherever it trained, and one started on a GPU resumes
+    on a CPU."""
     rendered_copies: int = 0
     """Layout copies rendered of each demonstration (``data/layout_copies.py``): the policies
     train on the demonstrations and these copies, each scene moved by up to ``rendered_reach``
@@ -217,6 +221,8 @@ class Plan:
             raise ValueError(f"rendered copies must be >= 0 and their reach a finite number "
                              f"> 0, got {self.rendered_copies} and {self.rendered_reach}")
         NoiseSpec(self.noise_kind, self.noise)  # a bad kind or sigma: one line
+        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
+            raise ValueError(f"device must be cpu, cuda or cuda:N, got {self.device!r}")
         check_sets(self.sets)
         for spec in {trained_spec(s) for s in self.policies}:  # a config refusing a value
             config_for(spec, self.obs, self.sets)

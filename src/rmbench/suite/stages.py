@@ -34,14 +34,16 @@ def read_json(path: Path, default):
         return default
 
 
-def add_time(folder: Path, key: str, seconds: float) -> None:
+def add_time(folder: Path, key: str, seconds: float, gpu: str | None = None) -> None:
     """Accumulate a stage's wall time in ``folder/timing.json``, and the machine it ran on in
-    ``machines`` (each machine that added time once: a training resumed elsewhere lists two)."""
+    ``machines`` (each machine that added time once: a training resumed elsewhere lists two),
+    with the GPU it used if any."""
     path = Path(folder) / TIMING
     timing = read_json(path, {})
     timing[key] = round(timing.get(key, 0.0) + seconds, 1)
     machines = timing.setdefault("machines", [])
-    if (here := describe()) not in machines:
+    here = describe() if gpu is None else {**describe(), "gpu": gpu}
+    if here not in machines:
         machines.append(here)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, (json.dumps(timing, indent=1) + "\n").encode())
@@ -165,6 +167,15 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
             "features_wall_s": timing.get("features_wall_s")}
 
 
+def gpu_name(device: str) -> str | None:
+    """The GPU a training on ``device`` ran on (None on the CPU)."""
+    if device == "cpu":
+        return None
+    import torch
+
+    return torch.cuda.get_device_name(torch.device(device))
+
+
 def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = False) -> Path:
     """The cell's checkpoint (its trained spec's: ``mem0:gt_classifier`` trains ``mem0``),
     resumed from its last saved state; a finished one is left alone."""
@@ -175,11 +186,11 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
         spec = trained_spec(spec)
         cfg = config_for(spec, plan.obs, plan.sets)
         train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=0,
-                                save_every=min(500, plan.steps))
+                                save_every=min(500, plan.steps), device=plan.device)
         _, fit = trainable(parse_policy(spec)[0])
         t0 = time.perf_counter()
         fit(plan.train_data_dir(out, task), folder, cfg, train_cfg, progress=progress)
-        add_time(folder, "train_wall_s", time.perf_counter() - t0)
+        add_time(folder, "train_wall_s", time.perf_counter() - t0, gpu=gpu_name(plan.device))
     return folder
 
 

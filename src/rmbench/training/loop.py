@@ -71,6 +71,16 @@ class TrainConfig:
             raise ValueError(f"device must be cpu or cuda, got {self.device!r}")
 
 
+# Where a run trains is not part of what it is: a run started on a GPU resumes on a CPU (or
+# another GPU), as one resumed on another machine does, with the batches it would have drawn.
+PLACE_FIELDS = ("device",)
+
+
+def _run_fields(cfg: TrainConfig) -> dict[str, Any]:
+    """The settings a resumed run must share with the saved one."""
+    return {k: v for k, v in asdict(cfg).items() if k not in PLACE_FIELDS}
+
+
 def lr_at(step: int, total: int, warmup: float, base: float, minimum: float) -> float:
     """Linear warm-up over ``warmup * total`` steps, then cosine from ``base`` to ``minimum``."""
     w = int(warmup * total)
@@ -123,7 +133,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
                               "base_lr": g["lr"], "min_lr": g["min_lr"]} for g in groups],
                             betas=(0.9, 0.999), weight_decay=cfg.weight_decay)
     # as JSON stores it (tuples become lists), so that a resume compares like with like
-    identity = json.loads(json.dumps({"describe": describe, "train": asdict(cfg),
+    identity = json.loads(json.dumps({"describe": describe, "train": _run_fields(cfg),
                                       "world": dist.world}))
     defaults = json.loads(json.dumps(config_defaults or {}))
     start = _resume(out, model, opt, identity, defaults, device)
@@ -203,6 +213,8 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
         raise TrainingError(f"{path}: unreadable training state ({type(err).__name__}: "
                             f"{str(err).splitlines()[0] if str(err) else ''})") from None
     saved = json.loads(state["identity"])
+    for field in PLACE_FIELDS:  # saved by a run from before they were left out
+        saved.get("train", {}).pop(field, None)
     if isinstance(saved.get("describe", {}).get("config"), dict):
         saved["describe"]["config"] = {**config_defaults, **saved["describe"]["config"]}
     what = differences(saved, identity)
