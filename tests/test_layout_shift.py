@@ -7,7 +7,12 @@ import shutil
 import numpy as np
 import pytest
 
-from rmbench.data.layout_shift import LayoutShift, add_layout_copies
+from rmbench.data.layout_shift import (
+    LayoutShift,
+    add_layout_copies,
+    layout_copies_cached,
+    solve_layout_copies,
+)
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset
 
@@ -56,6 +61,17 @@ def test_copies_are_solved_once_and_read_back(root, solves):
     assert_same(first, again)
     with_copies(root, seed=1)  # another seed draws other shifts: its own file
     assert len(list((root / ".cache").glob("layout-shift-*.npz"))) == 2
+
+
+def test_copies_solved_across_workers_are_the_ones_training_solves(root, tmp_path, solves):
+    alone = tmp_path / "alone"
+    shutil.copytree(root, alone)
+    assert not layout_copies_cached(root, COPIES, REACH, 0)
+    kept = solve_layout_copies(root, COPIES, REACH, 0, workers=2)
+    assert layout_copies_cached(root, COPIES, REACH, 0) and solves == []  # all in the workers
+    read = with_copies(root)
+    assert len(read) == kept and len(solves) == 1  # training read them: one solved as the check
+    assert_same(read, with_copies(alone))  # solved in this process, one after another
 
 
 def test_a_damaged_or_stale_cache_is_solved_again(root, solves, caplog):

@@ -267,6 +267,26 @@ def test_a_job_spends_its_share_of_the_cores(tmp_path, monkeypatch):
     assert seen == {"collect": {"workers": 2}, "eval": {"workers": 2}}
 
 
+def test_the_collect_job_solves_the_layout_copies_the_trainings_read(dataset, tmp_path):
+    import shutil
+
+    from tests.conftest import DATA_TASK as TASK
+
+    plan = Plan("state", (TASK,), ("mem0", "dp"), demos=3, steps=2, batch=2, episodes=1,
+                sets=("layout_copies=2", "layout_shift=0.02"))
+    assert stages.layout_copy_sets(plan) == [(2, 0.02)]  # one set for both policies
+    shutil.copytree(dataset, plan.data_dir(tmp_path, TASK), ignore=shutil.ignore_patterns(".cache"))
+    assert stages.demos_collected(plan, tmp_path, TASK) and not stages.collected(plan, tmp_path, TASK)
+    assert runner.Job("collect", TASK) in runner.plan_jobs(plan, tmp_path)
+    summary = stages.collect_stage(plan, tmp_path, TASK)
+    assert summary["layout_copies_wall_s"] > 0
+    assert stages.collected(plan, tmp_path, TASK)
+    assert runner.Job("collect", TASK) not in runner.plan_jobs(plan, tmp_path)
+    # solved once: a second collect job finds them and adds no time
+    assert stages.collect_stage(plan, tmp_path, TASK)["layout_copies_wall_s"] == summary[
+        "layout_copies_wall_s"]
+
+
 def test_rendered_copies_are_the_training_data_with_their_features_encoded_once(
         tmp_path, monkeypatch):
     """--rendered-copies: the collect job renders the copies and encodes the frozen backbone's

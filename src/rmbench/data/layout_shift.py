@@ -23,7 +23,10 @@ policy trained on a dataset asks for the same ones (the seed is the training see
 copies, reach, seed, the constants above, MuJoCo's version and each demonstration's data
 file (size and modification time), written atomically, and checked on reading by solving
 the first copy again (a changed robot model or solver fails it). A file that fails any of
-this is solved again and replaced.
+this is solved again and replaced. Each copy is a function of its demonstration and shift
+alone, so ``solve_layout_copies`` solves them across worker processes into the same file: a
+table's collection job does, before the trainings that read it start (two of them starting
+at once would otherwise both solve it, each on one core).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import io
 import json
 import logging
 import zipfile
+from collections import deque
 from dataclasses import replace
 from pathlib import Path
 
@@ -40,7 +44,8 @@ import mujoco
 import numpy as np
 
 from rmbench.data import layout as L
-from rmbench.data.reader import Episode
+from rmbench.data.reader import Dataset, Episode
+from rmbench.parallel import make_executor
 from rmbench.sim import robot
 from rmbench.sim.kinematics import GraspKinematics, natural_yaw
 from rmbench.sim.station import HOME_ARM
@@ -123,12 +128,25 @@ def _draws(episodes: list[Episode], copies: int, reach: float, seed: int):
     return [(k, rng.uniform(-reach, reach, 2)) for k in range(len(episodes)) for _ in range(copies)]
 
 
+# One LayoutShift per worker process, for the state names of the last job's dataset.
+_SHIFTER: tuple[tuple[str, ...], LayoutShift] | None = None
+
+
+def _shift(state_names: tuple[str, ...], ep: Episode, delta: np.ndarray) -> Episode | None:
+    global _SHIFTER
+    if _SHIFTER is None or _SHIFTER[0] != state_names:
+        _SHIFTER = (state_names, LayoutShift(state_names))
+    return _SHIFTER[1].shift(ep, delta)
+
+
 def shifted_copies(episodes: list[Episode], state_names, copies: int, reach: float,
-                   seed: int, cache: str | Path | None = None) -> list[Episode]:
+                   seed: int, cache: str | Path | None = None, workers: int = 1
+                   ) -> list[Episode]:
     """``copies`` shifted copies of each episode, each by (dx, dy) ~ U[-reach, reach]^2 drawn
     from ``seed``; copies out of reach are left out (so fewer may come back). With ``cache``
     (a file the caller names for these arguments), read from it when it holds them, else
-    stored there."""
+    stored there. ``workers`` processes solve them (each copy is a function of its episode and
+    shift alone, taken back in order: the copies do not depend on their number)."""
     if copies < 0 or reach < 0:
         raise ValueError(f"layout copies and shift must be >= 0, got {copies} and {reach}")
     if copies == 0 or reach == 0:
@@ -137,11 +155,23 @@ def shifted_copies(episodes: list[Episode], state_names, copies: int, reach: flo
     if cache is not None and (hit := _load(Path(cache), episodes, shifter)) is not None:
         return hit
     out, kept = [], []
-    for k, delta in _draws(episodes, copies, reach, seed):
-        moved = shifter.shift(episodes[k], delta)
-        if moved is not None:
-            out.append(moved)
-            kept.append((k, delta))
+    names = tuple(state_names)
+    executor = make_executor(workers)
+    pending: deque = deque()
+    todo = iter(_draws(episodes, copies, reach, seed))
+    try:
+        while True:
+            while len(pending) < executor.window and (draw := next(todo, None)) is not None:
+                k, delta = draw
+                pending.append((k, delta, executor.submit(_shift, names, episodes[k], delta)))
+            if not pending:
+                break
+            k, delta, job = pending.popleft()
+            if (moved := job.result()) is not None:
+                out.append(moved)
+                kept.append((k, delta))
+    finally:
+        executor.shutdown()
     if cache is not None:
         try:
             _save(Path(cache), out, kept)
@@ -191,11 +221,11 @@ def _load(path: Path, episodes: list[Episode], shifter: LayoutShift) -> list[Epi
     return copies
 
 
-def cache_path(examples, copies: int, reach: float, seed: int) -> Path:
-    """Where ``add_layout_copies`` keeps the copies of ``examples``' demonstrations."""
-    ds = examples.ds
+def cache_path(ds: Dataset, episodes: list[Episode], copies: int, reach: float,
+               seed: int) -> Path:
+    """Where the copies of ``ds``'s ``episodes`` are kept."""
     sources = [(ep.index, (s := (ds.root / L.data_file(ep.index)).stat()).st_size, s.st_mtime_ns)
-               for ep in examples.low_dim]
+               for ep in episodes]
     key = json.dumps([CACHE_FORMAT, copies, reach, seed, REST_RADIUS, MAX_MISS,
                       mujoco.__version__, sources])
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
@@ -205,7 +235,29 @@ def cache_path(examples, copies: int, reach: float, seed: int) -> Path:
 def add_layout_copies(examples, copies: int, reach: float, seed: int) -> int:
     """Append ``copies`` shifted copies (up to ``reach`` metres) of each demonstration to
     ``examples`` (a ``DemoDataset`` read without cameras); how many were kept."""
-    before = len(examples.low_dim)
-    examples.add_episodes(shifted_copies(examples.low_dim, examples.ds.state_names, copies,
-                                         reach, seed, cache_path(examples, copies, reach, seed)))
+    before, ds = len(examples.low_dim), examples.ds
+    examples.add_episodes(shifted_copies(
+        examples.low_dim, ds.state_names, copies, reach, seed,
+        cache_path(ds, examples.low_dim, copies, reach, seed)))
     return len(examples.low_dim) - before
+
+
+def _demonstrations(root: str | Path) -> tuple[Dataset, list[Episode]]:
+    ds = Dataset(root)
+    return ds, [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
+
+
+def solve_layout_copies(root: str | Path, copies: int, reach: float, seed: int,
+                        workers: int = 1) -> int:
+    """Solve and cache the copies that training with these arguments reads from the dataset
+    at ``root`` (every one of its demonstrations), across ``workers`` processes; how many were
+    kept. A table's collection does this once per dataset, before its trainings start."""
+    ds, episodes = _demonstrations(root)
+    return len(shifted_copies(episodes, ds.state_names, copies, reach, seed,
+                              cache_path(ds, episodes, copies, reach, seed), workers))
+
+
+def layout_copies_cached(root: str | Path, copies: int, reach: float, seed: int) -> bool:
+    """Whether the dataset at ``root`` holds a cache for these copies (checked on reading)."""
+    ds, episodes = _demonstrations(root)
+    return cache_path(ds, episodes, copies, reach, seed).exists()

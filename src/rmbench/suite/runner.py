@@ -51,8 +51,7 @@ def plan_jobs(plan: Plan, out: Path) -> dict[Job, tuple[Job, ...]]:
     """Every job still to run, with the jobs it waits for, in table order."""
     needs: dict[Job, tuple[Job, ...]] = {}
     for task in dict.fromkeys(t for t, _ in plan.cells()):
-        collect = Job("collect", task)
-        fresh = not stages.collected(plan, out, task)
+        collect, fresh = Job("collect", task), None  # asked only where a cell trains
         for _, spec in (c for c in plan.cells() if c[0] == task):
             if stages.evaluated(plan, out, task, spec) is not None:
                 continue
@@ -60,6 +59,8 @@ def plan_jobs(plan: Plan, out: Path) -> dict[Job, tuple[Job, ...]]:
                 needs[Job("eval", task, spec)] = ()
                 continue
             train = Job("train", task, trained_spec(spec))
+            if fresh is None:
+                fresh = not stages.collected(plan, out, task)
             if fresh:
                 needs.setdefault(collect, ())
             needs.setdefault(train, (collect,) if fresh else ())

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.data import CollectConfig, collect
+from rmbench.data.layout_shift import layout_copies_cached, solve_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.envs.noise import NoiseSpec
 from rmbench.eval import EvalConfig, evaluate
@@ -25,6 +26,7 @@ from rmbench.training.loop import CURVE_CSV, TrainConfig
 from rmbench.video import write_atomic
 
 TIMING = "timing.json"
+TRAIN_SEED = 0  # every cell's training seed, which the layout copies' draws follow
 
 
 def read_json(path: Path, default):
@@ -56,12 +58,28 @@ def demos_collected(plan: Plan, out: Path, task: str) -> bool:
 
 
 def collected(plan: Plan, out: Path, task: str) -> bool:
-    """Whether the task's training data is complete: demonstrations, copies, features."""
+    """Whether the task's training data is complete: demonstrations, rendered copies, features,
+    and the state's layout copies solved."""
     if not demos_collected(plan, out, task):
         return False
     if plan.rendered_copies and copies_done(plan, out, task) is None:
         return False
-    return not any(cache.missing(*wanted) for cache, wanted in feature_caches(plan, out, task))
+    if any(cache.missing(*wanted) for cache, wanted in feature_caches(plan, out, task)):
+        return False
+    data = plan.train_data_dir(out, task)
+    return all(layout_copies_cached(data, n, reach, TRAIN_SEED)
+               for n, reach in layout_copy_sets(plan))
+
+
+def layout_copy_sets(plan: Plan) -> list[tuple[int, float]]:
+    """The (copies, reach) of each set of layout copies the plan's policies train with
+    (``--set layout_copies``): solved once per dataset, by its collection."""
+    sets = set()
+    for spec in {trained_spec(s) for s in plan.policies}:
+        c = config_for(spec, plan.obs, plan.sets)
+        if c.layout_copies and c.layout_shift:
+            sets.add((c.layout_copies, c.layout_shift))
+    return sorted(sets)
 
 
 def copies_record(plan: Plan, out: Path, task: str) -> Path:
@@ -156,6 +174,12 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
         t0 = time.perf_counter()
         if cache.build(*wanted):
             add_time(root.parent, "features_wall_s", time.perf_counter() - t0)
+    data = plan.train_data_dir(out, task)
+    for n, reach in layout_copy_sets(plan):
+        if not layout_copies_cached(data, n, reach, TRAIN_SEED):
+            t0 = time.perf_counter()
+            solve_layout_copies(data, n, reach, TRAIN_SEED, workers)
+            add_time(root.parent, "layout_copies_wall_s", time.perf_counter() - t0)
     ds, timing = Dataset(root), read_json(root.parent / TIMING, {})
     return {"path": str(root), "episodes": ds.num_episodes, "frames": ds.num_frames,
             "cameras": list(ds.cameras), "resolution": f"{width}x{height}",
@@ -164,7 +188,8 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
             "collect_wall_s": timing.get("collect_wall_s"),
             "rendered_copies": copies_done(plan, out, task),
             "copies_wall_s": timing.get("copies_wall_s"),
-            "features_wall_s": timing.get("features_wall_s")}
+            "features_wall_s": timing.get("features_wall_s"),
+            "layout_copies_wall_s": timing.get("layout_copies_wall_s")}
 
 
 def gpu_name(device: str) -> str | None:
@@ -185,7 +210,7 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
     if not trained(plan, out, task, spec):
         spec = trained_spec(spec)
         cfg = config_for(spec, plan.obs, plan.sets)
-        train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=0,
+        train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=TRAIN_SEED,
                                 save_every=min(500, plan.steps), device=plan.device)
         _, fit = trainable(parse_policy(spec)[0])
         t0 = time.perf_counter()
