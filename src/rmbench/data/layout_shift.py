@@ -128,7 +128,7 @@ def _draws(episodes: list[Episode], copies: int, reach: float, seed: int):
     return [(k, rng.uniform(-reach, reach, 2)) for k in range(len(episodes)) for _ in range(copies)]
 
 
-# One LayoutShift per worker process, for the state names of the last job's dataset.
+# One LayoutShift per process (a worker's, or this one's), for the last dataset's state names.
 _SHIFTER: tuple[tuple[str, ...], LayoutShift] | None = None
 
 
@@ -151,11 +151,10 @@ def shifted_copies(episodes: list[Episode], state_names, copies: int, reach: flo
         raise ValueError(f"layout copies and shift must be >= 0, got {copies} and {reach}")
     if copies == 0 or reach == 0:
         return []
-    shifter = LayoutShift(state_names)
-    if cache is not None and (hit := _load(Path(cache), episodes, shifter)) is not None:
+    names = tuple(state_names)
+    if cache is not None and (hit := _load(Path(cache), episodes, names)) is not None:
         return hit
     out, kept = [], []
-    names = tuple(state_names)
     executor = make_executor(workers)
     pending: deque = deque()
     todo = iter(_draws(episodes, copies, reach, seed))
@@ -191,7 +190,8 @@ def _save(path: Path, copies: list[Episode], kept: list) -> None:
     write_atomic(path, buf.getvalue())
 
 
-def _load(path: Path, episodes: list[Episode], shifter: LayoutShift) -> list[Episode] | None:
+def _load(path: Path, episodes: list[Episode], state_names: tuple[str, ...]
+          ) -> list[Episode] | None:
     """The copies stored at ``path``, or None (logged) if it is missing, damaged, does not
     fit ``episodes`` or its first copy solves differently now."""
     if not path.exists():
@@ -211,7 +211,7 @@ def _load(path: Path, episodes: list[Episode], shifter: LayoutShift) -> list[Epi
                           environment_state=rows["environment_state"][i])
                   for i, k in enumerate(src)]
         if copies:
-            again = shifter.shift(episodes[src[0]], a["delta"][0])
+            again = _shift(state_names, episodes[src[0]], a["delta"][0])
             if again is None or not all(np.array_equal(getattr(again, n), getattr(copies[0], n))
                                         for n in FIELDS):
                 raise ValueError("its first copy solves differently now")

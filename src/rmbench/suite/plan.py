@@ -28,6 +28,7 @@ from typing import Any
 from rmbench.envs.noise import NoiseSpec
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered
+from rmbench.training.device import check_device
 
 POLICY_NAMES = ("mem0", "dp", "act")
 # every column of the two tables: policies, then Mem-0's ablations
@@ -221,8 +222,7 @@ class Plan:
             raise ValueError(f"rendered copies must be >= 0 and their reach a finite number "
                              f"> 0, got {self.rendered_copies} and {self.rendered_reach}")
         NoiseSpec(self.noise_kind, self.noise)  # a bad kind or sigma: one line
-        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
-            raise ValueError(f"device must be cpu, cuda or cuda:N, got {self.device!r}")
+        check_device(self.device)
         check_sets(self.sets)
         for spec in {trained_spec(s) for s in self.policies}:  # a config refusing a value
             config_for(spec, self.obs, self.sets)

@@ -34,6 +34,7 @@ from torch import nn
 from tqdm import tqdm
 
 from rmbench.identity import differences
+from rmbench.training.device import check_device
 from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
@@ -67,8 +68,7 @@ class TrainConfig:
             raise ValueError("steps, batch_size, save_every and log_every must be >= 1")
         if not 0 <= self.warmup < 1:
             raise ValueError(f"warmup is a fraction of the steps in [0, 1), got {self.warmup}")
-        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
-            raise ValueError(f"device must be cpu or cuda, got {self.device!r}")
+        check_device(self.device)
 
 
 # Where a run trains is not part of what it is: a run started on a GPU resumes on a CPU (or
