@@ -12,7 +12,8 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 
@@ -122,6 +123,22 @@ class Ray:
 
     def shutdown(self) -> None:
         pass
+
+
+def in_order(executor, calls: Iterable[tuple]) -> Iterator[tuple]:
+    """Run ``calls`` (``(tag, fn, args)`` each, drawn lazily) on ``executor`` with at most its
+    window in flight, and yield ``(tag, result)`` in the order they were given: what a caller
+    writes then does not depend on the number of workers or on the backend."""
+    pending: deque = deque()
+    calls = iter(calls)
+    while True:
+        while len(pending) < executor.window and (call := next(calls, None)) is not None:
+            tag, fn, args = call
+            pending.append((tag, executor.submit(fn, *args)))
+        if not pending:
+            return
+        tag, job = pending.popleft()
+        yield tag, job.result()
 
 
 def make_executor(workers: int, backend: str = "local", on_close: Callable[[], None] | None = None):

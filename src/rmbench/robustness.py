@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from rmbench.envs.noise import NoiseSpec
-from rmbench.parallel import make_executor
+from rmbench.parallel import in_order, make_executor
 from rmbench.rollout import EpisodeResult, run_expert
 from rmbench.tasks import get_task
 
@@ -70,22 +70,13 @@ def sweep(task: str, sigmas: Sequence[float], *, kind: str = "white", tau: float
     jobs = [(k, list(range(start, min(start + CHUNK, seed + episodes))))
             for k in range(len(specs)) for start in range(seed, seed + episodes, CHUNK)]
     executor = make_executor(workers, backend)
-
-    def collect(pending) -> None:  # results in submission order, whatever the worker count
-        j, job = pending.pop(0)
-        chunk = job.result()
-        results[j].episodes.extend(chunk)
-        if on_chunk:
-            on_chunk(specs[j], chunk)
-
     try:
-        pending: list = []
-        for k, seeds in jobs:
-            pending.append((k, executor.submit(_run_chunk, task, seeds, specs[k])))
-            if len(pending) >= executor.window:
-                collect(pending)
-        while pending:
-            collect(pending)
+        # results in submission order, whatever the worker count
+        for k, chunk in in_order(executor, ((k, _run_chunk, (task, seeds, specs[k]))
+                                            for k, seeds in jobs)):
+            results[k].episodes.extend(chunk)
+            if on_chunk:
+                on_chunk(specs[k], chunk)
     finally:
         executor.shutdown()
     return results

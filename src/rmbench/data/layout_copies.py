@@ -27,7 +27,6 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -42,7 +41,7 @@ from rmbench.data.record import EpisodeRecord, ImageStats, ReplayMismatch, execu
 from rmbench.data.writer import DatasetError, DatasetWriter
 from rmbench.envs.noise import NoiseSpec, perturber
 from rmbench.envs.registration import make
-from rmbench.parallel import make_executor
+from rmbench.parallel import in_order, make_executor
 from rmbench.sim import robot
 from rmbench.sim.fixtures import StaticPiece
 from rmbench.sim.objects import FreePiece
@@ -256,17 +255,12 @@ def copy_layouts(source: str | Path, out: str | Path, copies: int, reach: float,
     start = writer.num_episodes
     first, first_copy = _resume_point(writer, copies)
     executor = make_executor(workers, backend, on_close=_close_copier)
-    pending: deque = deque()
-    todo, missed = iter(range(first, n)), 0
+    calls = ((e, _copy, (str(src.root), e, copies, reach, seed, first_copy if e == first else 0))
+             for e in range(first, n))
+    missed = 0
     bar = tqdm(total=n, initial=first, unit="demo", disable=not progress, desc="layout copies")
     try:
-        while True:
-            while len(pending) < executor.window and (e := next(todo, None)) is not None:
-                pending.append(executor.submit(_copy, str(src.root), e, copies, reach, seed,
-                                               first_copy if e == first else 0))
-            if not pending:
-                break
-            records, out_of_reach = pending.popleft().result()
+        for _, (records, out_of_reach) in in_order(executor, calls):
             missed += out_of_reach
             for rec in records:
                 writer.commit(rec)

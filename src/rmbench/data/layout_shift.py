@@ -36,7 +36,6 @@ import io
 import json
 import logging
 import zipfile
-from collections import deque
 from dataclasses import replace
 from pathlib import Path
 
@@ -45,7 +44,7 @@ import numpy as np
 
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset, Episode
-from rmbench.parallel import make_executor
+from rmbench.parallel import in_order, make_executor
 from rmbench.sim import robot
 from rmbench.sim.kinematics import GraspKinematics, natural_yaw
 from rmbench.sim.station import HOME_ARM
@@ -156,19 +155,13 @@ def shifted_copies(episodes: list[Episode], state_names, copies: int, reach: flo
         return hit
     out, kept = [], []
     executor = make_executor(workers)
-    pending: deque = deque()
-    todo = iter(_draws(episodes, copies, reach, seed))
+    calls = (((k, delta), _shift, (names, episodes[k], delta))
+             for k, delta in _draws(episodes, copies, reach, seed))
     try:
-        while True:
-            while len(pending) < executor.window and (draw := next(todo, None)) is not None:
-                k, delta = draw
-                pending.append((k, delta, executor.submit(_shift, names, episodes[k], delta)))
-            if not pending:
-                break
-            k, delta, job = pending.popleft()
-            if (moved := job.result()) is not None:
+        for draw, moved in in_order(executor, calls):
+            if moved is not None:
                 out.append(moved)
-                kept.append((k, delta))
+                kept.append(draw)
     finally:
         executor.shutdown()
     if cache is not None:
@@ -221,11 +214,11 @@ def _load(path: Path, episodes: list[Episode], state_names: tuple[str, ...]
     return copies
 
 
-def cache_path(ds: Dataset, episodes: list[Episode], copies: int, reach: float,
-               seed: int) -> Path:
-    """Where the copies of ``ds``'s ``episodes`` are kept."""
-    sources = [(ep.index, (s := (ds.root / L.data_file(ep.index)).stat()).st_size, s.st_mtime_ns)
-               for ep in episodes]
+def cache_path(ds: Dataset, indices: list[int], copies: int, reach: float, seed: int) -> Path:
+    """Where the copies of ``ds``'s episodes ``indices`` are kept (named by their data files,
+    so that finding the cache reads no episode)."""
+    sources = [(e, (s := (ds.root / L.data_file(e)).stat()).st_size, s.st_mtime_ns)
+               for e in indices]
     key = json.dumps([CACHE_FORMAT, copies, reach, seed, REST_RADIUS, MAX_MISS,
                       mujoco.__version__, sources])
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
@@ -238,13 +231,8 @@ def add_layout_copies(examples, copies: int, reach: float, seed: int) -> int:
     before, ds = len(examples.low_dim), examples.ds
     examples.add_episodes(shifted_copies(
         examples.low_dim, ds.state_names, copies, reach, seed,
-        cache_path(ds, examples.low_dim, copies, reach, seed)))
+        cache_path(ds, [ep.index for ep in examples.low_dim], copies, reach, seed)))
     return len(examples.low_dim) - before
-
-
-def _demonstrations(root: str | Path) -> tuple[Dataset, list[Episode]]:
-    ds = Dataset(root)
-    return ds, [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
 
 
 def solve_layout_copies(root: str | Path, copies: int, reach: float, seed: int,
@@ -252,12 +240,14 @@ def solve_layout_copies(root: str | Path, copies: int, reach: float, seed: int,
     """Solve and cache the copies that training with these arguments reads from the dataset
     at ``root`` (every one of its demonstrations), across ``workers`` processes; how many were
     kept. A table's collection does this once per dataset, before its trainings start."""
-    ds, episodes = _demonstrations(root)
+    ds = Dataset(root)
+    episodes = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
     return len(shifted_copies(episodes, ds.state_names, copies, reach, seed,
-                              cache_path(ds, episodes, copies, reach, seed), workers))
+                              cache_path(ds, list(range(ds.num_episodes)), copies, reach, seed),
+                              workers))
 
 
 def layout_copies_cached(root: str | Path, copies: int, reach: float, seed: int) -> bool:
     """Whether the dataset at ``root`` holds a cache for these copies (checked on reading)."""
-    ds, episodes = _demonstrations(root)
-    return cache_path(ds, episodes, copies, reach, seed).exists()
+    ds = Dataset(root)
+    return cache_path(ds, list(range(ds.num_episodes)), copies, reach, seed).exists()

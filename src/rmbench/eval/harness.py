@@ -19,7 +19,6 @@ import logging
 import os
 import re
 import time
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,7 +29,7 @@ from rmbench.eval.episode import ENDINGS
 from rmbench.eval.seeds import verified_seeds
 from rmbench.eval.worker import close_worker, episode_job
 from rmbench.identity import differences
-from rmbench.parallel import BACKENDS, make_executor
+from rmbench.parallel import BACKENDS, in_order, make_executor
 from rmbench.policies.registry import parse_spec
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
@@ -191,20 +190,14 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
     done = {r["seed"] for r in records}
     todo = [(i, s) for i, s in enumerate(seeds) if s not in done]
     n_todo = len(todo)
-    pending: deque = deque()
+    calls = ((i, episode_job, (task, cfg.policy, cfg.instructions, s, cfg.video_rule(i, None)))
+             for i, s in todo)
     bar = tqdm(total=len(seeds), initial=len(done), unit="ep", desc=f"{task} {cfg.policy}",
                disable=not cfg.progress, dynamic_ncols=True)
     t0 = time.perf_counter()
     try:
         with open(path, "a", encoding="utf-8") as f:
-            while todo or pending:
-                while todo and len(pending) < executor.window:
-                    i, s = todo.pop(0)
-                    pending.append((i, executor.submit(episode_job, task, cfg.policy,
-                                                       cfg.instructions, s,
-                                                       cfg.video_rule(i, None))))
-                i, job = pending.popleft()
-                rec = job.result()
+            for i, rec in in_order(executor, calls):
                 video = rec.pop("video")
                 rec["video"] = None
                 if video is not None and cfg.video_rule(i, rec["success"]):
