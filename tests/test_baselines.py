@@ -171,17 +171,19 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(ckpt, dataset, tmp_pat
         assert torch.equal(a[k], b[k]), k
 
 
-def test_a_run_saved_on_a_gpu_resumes_on_the_cpu(dataset, tmp_path, interrupt_training):
+def test_a_run_saved_on_a_gpu_elsewhere_resumes_on_the_cpu_here(dataset, tmp_path,
+                                                                 interrupt_training):
     from safetensors.torch import load_file
 
     train_tiny("act", dataset, tmp_path / "a", steps=6)
     interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "b", steps=6))
-    # the state a run on a GPU leaves (as runs saved before the device was left out of a
-    # run's identity do): its training settings name the device
+    # the state a run on a lent GPU machine leaves: its dataset in another folder there, and
+    # (as runs saved before the device was left out of a run's identity do) the device named
     path = tmp_path / "b" / "training" / "state.pt"
     state = torch.load(path, weights_only=True)
     identity = json.loads(state["identity"])
     identity["train"]["device"] = "cuda:0"
+    identity["describe"]["dataset"]["path"] = "/tmp/t/put_back_block/data"
     torch.save({**state, "identity": json.dumps(identity, sort_keys=True)}, path)
     assert train_tiny("act", dataset, tmp_path / "b", steps=6)["resumed_from"] == 3
     a, b = load_file(tmp_path / "a" / "model.safetensors"), load_file(tmp_path / "b" / "model.safetensors")

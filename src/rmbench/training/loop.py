@@ -72,13 +72,27 @@ class TrainConfig:
 
 
 # Where a run trains is not part of what it is: a run started on a GPU resumes on a CPU (or
-# another GPU), as one resumed on another machine does, with the batches it would have drawn.
+# another GPU), and one started on a lent machine resumes at home, where the same dataset lives
+# in another folder; it draws the batches it would have drawn. The dataset's episodes and
+# frames stay part of it.
 PLACE_FIELDS = ("device",)
 
 
 def _run_fields(cfg: TrainConfig) -> dict[str, Any]:
     """The settings a resumed run must share with the saved one."""
     return {k: v for k, v in asdict(cfg).items() if k not in PLACE_FIELDS}
+
+
+def _placeless(identity: dict) -> dict:
+    """``identity`` without where the run trained: its device (named by states saved before it
+    was left out) and its dataset's folder (kept in the checkpoint's description)."""
+    out = json.loads(json.dumps(identity))
+    for field in PLACE_FIELDS:
+        out.get("train", {}).pop(field, None)
+    dataset = out.get("describe", {}).get("dataset")
+    if isinstance(dataset, dict):
+        dataset.pop("path", None)
+    return out
 
 
 def lr_at(step: int, total: int, warmup: float, base: float, minimum: float) -> float:
@@ -213,11 +227,9 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
         raise TrainingError(f"{path}: unreadable training state ({type(err).__name__}: "
                             f"{str(err).splitlines()[0] if str(err) else ''})") from None
     saved = json.loads(state["identity"])
-    for field in PLACE_FIELDS:  # saved by a run from before they were left out
-        saved.get("train", {}).pop(field, None)
     if isinstance(saved.get("describe", {}).get("config"), dict):
         saved["describe"]["config"] = {**config_defaults, **saved["describe"]["config"]}
-    what = differences(saved, identity)
+    what = differences(_placeless(saved), _placeless(identity))
     if what:
         raise TrainingError(f"{out} holds a training run with other arguments ({what}); "
                             f"use another --out")
