@@ -235,6 +235,11 @@ def add_layout_copies(examples, copies: int, reach: float, seed: int) -> int:
     return len(examples.low_dim) - before
 
 
+def _whole_cache(ds: Dataset, copies: int, reach: float, seed: int) -> Path:
+    """The cache of the copies of every demonstration in ``ds`` (what a training reads)."""
+    return cache_path(ds, list(range(ds.num_episodes)), copies, reach, seed)
+
+
 def solve_layout_copies(root: str | Path, copies: int, reach: float, seed: int,
                         workers: int = 1) -> int:
     """Solve and cache the copies that training with these arguments reads from the dataset
@@ -243,11 +248,9 @@ def solve_layout_copies(root: str | Path, copies: int, reach: float, seed: int,
     ds = Dataset(root)
     episodes = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
     return len(shifted_copies(episodes, ds.state_names, copies, reach, seed,
-                              cache_path(ds, list(range(ds.num_episodes)), copies, reach, seed),
-                              workers))
+                              _whole_cache(ds, copies, reach, seed), workers))
 
 
 def layout_copies_cached(root: str | Path, copies: int, reach: float, seed: int) -> bool:
     """Whether the dataset at ``root`` holds a cache for these copies (checked on reading)."""
-    ds = Dataset(root)
-    return cache_path(ds, list(range(ds.num_episodes)), copies, reach, seed).exists()
+    return _whole_cache(Dataset(root), copies, reach, seed).exists()
