@@ -1,7 +1,8 @@
 """Aliasing points, measured for every task: head-camera pixel distance between the two
 moments of ``Task.aliasing_pair`` vs the same moment in an unrelated seed, the same for the
 state observation (vs the distance between layouts' first frames; "core" leaves out the
-headings of symmetric pieces), and how far the expert's subsequent actions diverge.
+headings of symmetric pieces), the largest difference of the arms' joints (rad, grippers
+apart), and how far the expert's subsequent actions diverge.
 
     python benchmarks/aliasing.py [--seed 100000] [--out benchmarks/results/aliasing.json]
 """
@@ -25,14 +26,14 @@ def main() -> None:
     args = ap.parse_args()
     rows = []
     print(f"{'task':<20} {'TMC':<5} {'alias px':>9} {'unrelated px':>13} {'ratio':>6} "
-          f"{'state':>7} {'core':>6} {'action div':>10}  next subtasks")
+          f"{'state':>7} {'core':>6} {'arms':>6} {'action div':>10}  next subtasks")
     for cls in ordered():
         r = measure(cls.name, seed=args.seed)
         rows.append({**r.to_dict(), "tmc": cls.tmc})
         same = r.next_subtasks[0] == r.next_subtasks[1]
         nxt = f"same text ({r.next_subtasks[0]})" if same else " / ".join(r.next_subtasks)
         print(f"{r.task:<20} {cls.tmc:<5} {r.pixel_distance:>9.3f} {r.unrelated_distance:>13.3f} "
-              f"{r.ratio:>6.3f} {r.state_ratio:>7.3f} {r.state_ratio_core:>6.3f} "
+              f"{r.ratio:>6.3f} {r.state_ratio:>7.3f} {r.state_ratio_core:>6.3f} {r.arm_gap:>6.3f} "
               f"{r.action_divergence:>10.3f}  {nxt}", flush=True)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -7,7 +7,9 @@ expert's next subtask (or, where the text is the same, its next actions) differ.
 distance is compared with the same moment in an unrelated seed. The distance between the two
 moments' state observations (``Task.environment_state``) is compared with the distance between
 the first frames of the two seeds: a state policy meets the same aliasing as a pixel policy,
-or the state vector leaks what memory should carry.
+or the state vector leaks what memory should carry. Every policy also reads the arms' joints,
+so the two moments' joints are compared too: an arm left where the last step put it tells the
+steps apart as surely as the table would.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
+from rmbench.sim.robot import JOINT_NAMES
 from rmbench.tasks import get_task
 from rmbench.tasks.state import is_continuous, symmetric_heading
 
@@ -30,6 +33,7 @@ class Moment:
     actions: np.ndarray  # the expert's actions from the moment to the end of the episode
     state: np.ndarray | None = None  # the task's environment_state() at the moment
     first_state: np.ndarray | None = None  # ... and at the episode's first frame
+    joints: np.ndarray | None = None  # the arms' joint positions at the moment (agent_pos)
 
 
 @dataclass
@@ -58,6 +62,11 @@ class AliasingResult:
     state_entry: str = ""  # the entry that differs most between the two moments
     state_discrete_differ: tuple[str, ...] = ()  # flags, one-hots, colours, digits that differ
     state_position_jitter: float = float("nan")  # max |difference| of x, y, z entries (m)
+    # The arms' joints (what every policy reads beside the scene): the largest difference
+    # between the two moments, over the twelve arm joints and over the two grippers (rad).
+    arm_gap: float = float("nan")
+    arm_entry: str = ""  # the arm joint that differs most
+    gripper_gap: float = float("nan")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -76,7 +85,7 @@ def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
         first_state = env.unwrapped.task.environment_state()
         plan = info["plan"]
         reached, seen, frame, step = info["subtask_step"] >= stage, 0, None, 0
-        state, found = None, False
+        state, joints, found = None, None, False
         actions: list[np.ndarray] = []
         for t in range(env.unwrapped.step_limit):
             action = expert.act(obs)
@@ -85,6 +94,7 @@ def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
                 if seen == segment:
                     found, step = True, t
                     state = env.unwrapped.task.environment_state()
+                    joints = np.asarray(obs["agent_pos"], dtype=float)
                     if render:
                         frame = env.unwrapped.sim.render(["head"], width, height)["head"]
             if found:
@@ -98,7 +108,7 @@ def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
                                f"segment {segment} with {hidden}")
         subtasks = get_task(task).subtasks
         return Moment(frame, step, subtasks[plan[stage]] if stage < len(plan) else "done",
-                      np.array(actions), state, first_state)
+                      np.array(actions), state, first_state, joints)
     finally:
         env.close()
 
@@ -149,6 +159,8 @@ def measure(task: str, seed: int = 100000, unrelated_seed: int | None = None,
     discrete = tuple(n for n, g in zip(names, gap, strict=True) if g > 0 and not is_continuous(n))
     jitter = max((g for n, g in zip(names, gap, strict=True) if n.endswith(("_x", "_y", "_z"))),
                  default=0.0)
+    joint_gap = np.abs(a.joints - b.joints)
+    gripper = np.array([n.endswith("gripper") for n in JOINT_NAMES])
     n = max(len(a.actions), len(b.actions))  # a finished episode holds its last action
     pad = [np.concatenate([m.actions, np.repeat(m.actions[-1:], n - len(m.actions), 0)])
            for m in (a, b)]
@@ -156,4 +168,7 @@ def measure(task: str, seed: int = 100000, unrelated_seed: int | None = None,
                           round(d / max(d_other, 1e-9), 3), (a.next_subtask, b.next_subtask),
                           round(float(np.abs(pad[0] - pad[1]).max()), 3), (a.step, b.step),
                           *(round(v, 4) for v in ratios[0]), round(ratios[1][2], 4), worst,
-                          discrete, round(float(jitter), 4))
+                          discrete, round(float(jitter), 4),
+                          round(float(joint_gap[~gripper].max()), 4),
+                          JOINT_NAMES[int(np.argmax(np.where(gripper, -1.0, joint_gap)))],
+                          round(float(joint_gap[gripper].max()), 4))

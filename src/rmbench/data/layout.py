@@ -43,8 +43,7 @@ SUBTASK_END = "subtask_end"
 PROGRESS = "progress"
 INDEX_COLUMNS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
 
-JOINT_NAMES = [f"{side}_{name}" for side in robot.SIDES
-               for name in (*robot.ARM_JOINTS, "gripper")]
+JOINT_NAMES = list(robot.JOINT_NAMES)  # a list, as the dataset's info.json stores it
 EE_NAMES = [f"{side}_{c}" for side in robot.SIDES for c in ("x", "y", "z", "qw", "qx", "qy", "qz")]
 assert len(JOINT_NAMES) == ACTION_DIM and len(EE_NAMES) == EE_POSE_DIM
 

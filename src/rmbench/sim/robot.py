@@ -18,6 +18,8 @@ import numpy as np
 
 SIDES = ("left", "right")
 ARM_JOINTS = ("waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate")
+# The 14 joints a policy reads (agent_pos) and commands (the action), in that order.
+JOINT_NAMES = tuple(f"{side}_{name}" for side in SIDES for name in (*ARM_JOINTS, "gripper"))
 # Finger slide range of the asset (metres from the gripper centre line, per finger).
 FINGER_CLOSED, FINGER_OPEN = 0.021, 0.057
 
