@@ -24,6 +24,9 @@ from rmbench.sim.robot import JOINT_NAMES
 from rmbench.tasks import get_task
 from rmbench.tasks.state import is_continuous, symmetric_heading
 
+_GRIPPER = np.array([n.endswith("gripper") for n in JOINT_NAMES])  # in the arms' joint vector
+_ARM_JOINTS = [n for n, g in zip(JOINT_NAMES, _GRIPPER, strict=True) if not g]
+
 
 @dataclass
 class Moment:
@@ -159,8 +162,8 @@ def measure(task: str, seed: int = 100000, unrelated_seed: int | None = None,
     discrete = tuple(n for n, g in zip(names, gap, strict=True) if g > 0 and not is_continuous(n))
     jitter = max((g for n, g in zip(names, gap, strict=True) if n.endswith(("_x", "_y", "_z"))),
                  default=0.0)
-    joint_gap = np.abs(a.joints - b.joints)
-    gripper = np.array([n.endswith("gripper") for n in JOINT_NAMES])
+    arm_gap = np.abs(a.joints - b.joints)[~_GRIPPER]
+    gripper_gap = np.abs(a.joints - b.joints)[_GRIPPER]
     n = max(len(a.actions), len(b.actions))  # a finished episode holds its last action
     pad = [np.concatenate([m.actions, np.repeat(m.actions[-1:], n - len(m.actions), 0)])
            for m in (a, b)]
@@ -169,6 +172,5 @@ def measure(task: str, seed: int = 100000, unrelated_seed: int | None = None,
                           round(float(np.abs(pad[0] - pad[1]).max()), 3), (a.step, b.step),
                           *(round(v, 4) for v in ratios[0]), round(ratios[1][2], 4), worst,
                           discrete, round(float(jitter), 4),
-                          round(float(joint_gap[~gripper].max()), 4),
-                          JOINT_NAMES[int(np.argmax(np.where(gripper, -1.0, joint_gap)))],
-                          round(float(joint_gap[gripper].max()), 4))
+                          round(float(arm_gap.max()), 4), _ARM_JOINTS[int(np.argmax(arm_gap))],
+                          round(float(gripper_gap.max()), 4))
