@@ -30,20 +30,18 @@ cubes show traded yaws (in the frames too), up to 0.4 rad apart. No frame tells 
 from a drawn one, so the test bounds the core ratio.
 
 The arms' joints, which every policy reads, agree at the pair as well (largest difference over
-the twelve arm joints at most 0.004 rad), on every task but battery_try. There the left arm
-makes every flip and its wrist keeps the turn of the last one: the pair's moments differ by
-half a turn of the left wrist (3.154 rad), so the arms tell the tries apart, and a policy
-without memory can follow the expert's order (docs/results/benchmark_state.md). The test
-holds that measured defect until the expert is mended. The grippers differ by 0.40 on
-swap_blocks, whose pair is the episode's first step against its end (the opening at reset
-against the expert's after a release); that is not bounded here.
+the twelve arm joints at most 0.004 rad). In battery_try that holds because the left arm,
+which makes every flip, waits above the holder in one pose between tries; before it did, its
+wrist kept the turn of the last flip (3.154 rad apart at the pair) and a policy without memory
+could follow the expert's order. The grippers differ by 0.40 on swap_blocks, whose pair is
+the episode's first step against its end (the opening at reset against the expert's after a
+release); that is not bounded here.
 """
 
 from rmbench.aliasing import measure
 
 STATE_RATIO = 0.2  # the core ratio's bound; measured at most 0.075 (swap_blocks)
-ARM_GAP = 0.05  # rad, the arm joints' bound; measured at most 0.004 where the arms agree
-ARMS_TELL = {"battery_try"}  # the arms differ at the pair: the measured defect above
+ARM_GAP = 0.05  # rad, the arm joints' bound; measured at most 0.004
 
 
 def test_aliasing_point(task_name):
@@ -56,8 +54,5 @@ def test_aliasing_point(task_name):
     assert not r.state_discrete_differ, r
     assert r.state_position_jitter < 0.02, r
     assert r.state_ratio_core < STATE_RATIO, r
-    # the arms alias too, but where they are measured not to
-    if task_name in ARMS_TELL:
-        assert r.arm_gap > ARM_GAP, r
-    else:
-        assert r.arm_gap < ARM_GAP, r
+    # and so do the arms
+    assert r.arm_gap < ARM_GAP, r

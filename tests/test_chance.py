@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 
 from rmbench.eval.chance import (
+    BATTERY_FLIP_STEPS,
+    BATTERY_INSERTS,
     absorbed,
     battery_flips,
     chance,
@@ -35,15 +37,16 @@ def test_one_guess_among_identical_places():
 
 def test_battery_flips_match_a_simulated_random_walk():
     assert battery_flips(100, (150, 150)) == 0.0  # no flip fits
-    assert battery_flips(150, (150, 150)) == pytest.approx(1 / 3)  # (1,0) or (0,1), one in two
+    assert battery_flips(150, (150, 150)) == pytest.approx(1 / 3)  # the first, left: (1,0)
     assert battery_flips(600, (150, 150)) == pytest.approx(3 / 4)  # four flips
     rng = np.random.default_rng(0)
     pairs, hits, n = ((1, 0), (1, 1), (0, 1)), 0, 20000
     for _ in range(n):
-        correct, state, left = pairs[rng.integers(3)], [0, 0], 674.0
+        correct, state, left = pairs[rng.integers(3)], [0, 0], 1000.0 - BATTERY_INSERTS
+        first = True  # the expert's flip of the left cell
         while tuple(state) != correct:
-            k = rng.integers(2)
-            left -= (161.4, 116.5)[k]
+            k, first = (0 if first else rng.integers(2)), False
+            left -= BATTERY_FLIP_STEPS[k]
             if left < 0:
                 break
             state[k] ^= 1

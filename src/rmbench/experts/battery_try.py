@@ -3,6 +3,8 @@ order while the lamp stays off. It learns the answer only from the lamp, as a po
 
 from __future__ import annotations
 
+from itertools import chain
+
 import numpy as np
 
 from rmbench.experts.base import ScriptedExpert, register_expert
@@ -13,6 +15,8 @@ from rmbench.tasks.battery_try import PAIRS, SLOT_TOL, TRIES
 
 OPENING = 0.5  # enough for a 24 mm cell, narrow beside the holder's plates
 AWAY = np.pi / 2  # yaw of a positive end pointing away from the robot
+READY_YAW = 0.0  # the waiting gripper's yaw, across a cell lying along y as the slots hold it
+SETTLE = 10  # steps the waiting arm holds, for its servos to settle whatever it did before
 HOVER = 0.08  # halfway down (where a set-down is lined up) a held cell still clears the plates
 
 
@@ -54,6 +58,9 @@ class BatteryTryExpert(ScriptedExpert):
             if task.lamp.state == "green":
                 break
             k = 0 if before[0] != after[0] else 1
-            if "left" in m.away:  # between tries the arm waits above the holder, always the same
-                yield from self.label(2 + k, m.move_to("left", ready, m.gripper_yaw("left")))
+            if "left" in m.away:  # between tries the arm waits above the holder in one pose:
+                # its wrist must not keep the turn of the last flip, which would tell the tries
+                # apart without memory
+                yield from self.label(2 + k, chain(m.approach("left", ready, READY_YAW, park=True),
+                                                   m.hold(SETTLE)))
             yield from self.label(2 + k, move(k, AWAY if after[k] == 0 else -AWAY, "left"))

@@ -198,10 +198,12 @@ class Motion:
             self.cmd[self._slice(side)] = q
             yield self.cmd.copy()
 
-    def approach(self, side: str, pos, yaw: float) -> Actions:
+    def approach(self, side: str, pos, yaw: float, park: bool = False) -> Actions:
         """From anywhere (e.g. home) to a top-down pose at ``pos`` through joint space. An arm
-        already out is solved from where it is, so the wrist does not unwind a turn."""
-        seed = self.joints(side) if side in self.away else None
+        already out is solved from where it is, so the wrist does not unwind a turn; unless it
+        parks: then it takes the one solution found from the reaching posture, so where it
+        waits does not show where it has been (a memory task's arm must not be its memory)."""
+        seed = self.joints(side) if side in self.away and not park else None
         q, err = self.ik.solve(side, pos, top_down_quat(yaw), seed=seed)
         if err > 0.005:
             raise GaveUp(f"{side} arm cannot reach {np.round(pos, 3)} (IK error {err:.3f} m)")

@@ -18,8 +18,8 @@ Failure: a battery off the table.
 
 Memory: TMC M(n). Aliasing point: the slots' contact plates hide the cells' ends from the
 head camera, so after a failed try the holder looks like after any other failed try; only the
-past tells which pairs were already tried. Without it, flipping a cell at random finds the
-pair within the step limit 79% of the time (``eval/chance.py``).
+past tells which pairs were already tried. Without it, flipping a cell at random after the first
+finds the pair within the step limit 75% of the time (``eval/chance.py``).
 """
 
 from __future__ import annotations
