@@ -173,10 +173,12 @@ def battery_flips(budget: float, cost: tuple[float, float] = BATTERY_FLIP_STEPS)
                 total += 0.5 * hit(moved, correct, left - cost[k])
         return total
 
-    pairs = ((1, 0), (1, 1), (0, 1))
-    if cost[0] > budget:
+    from rmbench.tasks.battery_try import PAIRS, TRIES, flips
+
+    first = flips(PAIRS[-1])[0]  # the cell the expert's first flip turns
+    if cost[first] > budget:
         return 0.0
-    return sum(hit((1, 0), correct, budget - cost[0]) for correct in pairs) / len(pairs)
+    return sum(hit(TRIES[1], correct, budget - cost[first]) for correct in PAIRS) / len(PAIRS)
 
 
 def swapped(order: tuple, pair: tuple[int, int]) -> tuple:
