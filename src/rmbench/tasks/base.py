@@ -133,8 +133,12 @@ class Task:
         self._stage = 0
         self._best_progress = 0.0
 
-    def advance(self, stage: int, progress: float) -> tuple[int, float]:
-        """Stages and progress only move forward within an episode."""
+    def advance(self, stage: int, progress: float, solved: bool = False) -> tuple[int, float]:
+        """Stages and progress only move forward within an episode. A solved task is done,
+        whichever route it took: a trial task can be solved off its plan (a lucky guess, tries
+        in another order), and its progress must not then read as a failure's."""
+        if solved:
+            stage, progress = len(self.plan()), 1.0
         self._stage = max(self._stage, stage)
         self._best_progress = max(self._best_progress, progress)
         return self._stage, self._best_progress

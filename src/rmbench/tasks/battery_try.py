@@ -163,9 +163,10 @@ class BatteryTry(Task):
         reason = ""
         if min(b.pos(self.data)[2] for b in self.batteries) < TABLE_TOP - 0.05:
             reason = "a battery fell off the table"
-        stage, progress = self.advance(self.cursor, self.cursor / len(plan))
+        success = lit and not reason
+        stage, progress = self.advance(self.cursor, self.cursor / len(plan), solved=success)
         preds = {"left_orientation": -1 if config[0] is None else config[0],
                  "right_orientation": -1 if config[1] is None else config[1],
                  "lamp": self.lamp.state, "correct": list(self.correct)}
-        return Evaluation(success=lit and not reason, failure=bool(reason), progress=progress,
+        return Evaluation(success=success, failure=bool(reason), progress=progress,
                           stage=stage, failure_reason=reason, predicates=preds)

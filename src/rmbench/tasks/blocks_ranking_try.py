@@ -203,10 +203,11 @@ class BlocksRankingTry(Task):
             reason = "a cube was left resting on another"
         elif zs[0] < TABLE_TOP - 0.05:
             reason = "a cube fell off the table"
-        stage, progress = self.advance(self.cursor, self.cursor / len(plan))
+        success = solved and not reason
+        stage, progress = self.advance(self.cursor, self.cursor / len(plan), solved=success)
         preds = {"row": list(row) if row else [], "target_order": list(self.target),
                  "presses": self.button.count, "lamp": self.lamp.state,
                  "tries_needed": len(self.orders)}
-        return Evaluation(success=solved and not reason, failure=bool(reason),
+        return Evaluation(success=success, failure=bool(reason),
                           progress=progress, stage=stage, failure_reason=reason,
                           predicates=preds)
