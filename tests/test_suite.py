@@ -220,6 +220,8 @@ def test_tables_mark_missing_and_absent_cells(tmp_path):
                             "press_button": {"mem0": None, "mem0:no_key": None}}
     text = tables.markdown(res)
     assert "| put_back_block | M(1) | — | n/a |" in text
+    assert "| **average M(n)** | M(n) | — | — |" in text
+    assert "| **average (all)** |  | — | n/a |" in text  # no_key has no M(1) cell to average
     assert "| swap_T |" not in text  # only the plan's tasks
     assert stages.fraction(plan, tmp_path, "train", "put_back_block", "mem0") == 0.0
 

@@ -51,16 +51,20 @@ def _columns(res: dict[str, Any], specs: tuple[str, ...]) -> list[str]:
 def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] = (),
                     metric: str = "success_rate") -> list[str]:
     """``eval.report.table`` over the plan's tasks, one column per spec: "—" where a cell is
-    not evaluated yet, "n/a" where the column has no cell (no_key on an M(1) task)."""
+    not evaluated yet, "n/a" where the column has no cell (no_key on an M(1) task, and so in
+    the average over both groups)."""
     runs = [{"name": column(s), "summary": {"tasks": {t: row[s] for t, row in res["cells"].items()
                                                       if row.get(s)}}} for s in specs]
     header, rows = table(runs, list(published), metric, list(res["cells"]), with_chance=True)
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    groups = {r[1] for r in rows if r[1]}
     for r in rows:
         name = f"**{r[0]}**" if str(r[0]).startswith("average") else r[0]
         values = []
         for k, v in enumerate(r[2:]):
-            absent = k < len(specs) and r[1] and not applies(specs[k], r[1])
+            # the overall average spans every group listed: a column absent from one has none
+            scope = [r[1]] if r[1] else groups
+            absent = k < len(specs) and not all(applies(specs[k], g) for g in scope)
             values.append("n/a" if absent else "—" if v is None else f"{v:.1f}")
         lines.append("| " + " | ".join([name, r[1], *values]) + " |")
     return lines
