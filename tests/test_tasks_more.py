@@ -77,7 +77,6 @@ def test_blocks_ranking_lamp_tells_the_verdict():
     press(env, task.button)
     ev = task.evaluate()
     assert task.lamp.state == "green" and ev.success
-    assert ev.progress == 1.0 and ev.stage == len(task.plan())
     assert ev.progress == 1.0 and ev.stage == len(task.plan())  # solved off its plan
 
 
@@ -122,7 +121,6 @@ def test_battery_lamp_only_for_the_correct_pair():
     settle(env)
     ev = task.evaluate()
     assert task.lamp.state == "green" and ev.success
-    assert ev.progress == 1.0 and ev.stage == len(task.plan())
     assert ev.progress == 1.0 and ev.stage == len(task.plan())  # solved off its plan
 
 
