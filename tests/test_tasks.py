@@ -2,6 +2,7 @@
 
 import mujoco
 import numpy as np
+import pytest
 
 import rmbench
 
@@ -140,3 +141,14 @@ def test_press_button_tiles_show_the_digits():
         lit = {s for s, gid in tile.seg_ids.items()
                if np.allclose(task.model.geom_rgba[gid], tile.ink_rgba)}
         assert lit == set(DIGIT_SEGMENTS[digit])
+
+
+def test_an_evaluation_that_contradicts_itself_is_refused():
+    """Every task's verdict goes through Evaluation, so its invariants hold for all nine: a
+    success is full progress, and never a failure too."""
+    from rmbench.tasks.base import Evaluation
+    Evaluation(success=True, failure=False, progress=1.0, stage=3)
+    with pytest.raises(ValueError, match="progress 1.0"):
+        Evaluation(success=True, failure=False, progress=0.5, stage=1)
+    with pytest.raises(ValueError, match="success and failure"):
+        Evaluation(success=True, failure=True, progress=1.0, stage=3)

@@ -36,6 +36,14 @@ class Evaluation:
     failure_reason: str = ""
     predicates: dict[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self):
+        # A success with partial progress would publish a solved episode as a failure's
+        # progress (a trial task solved off its plan did once: ``Task.advance(solved=)``).
+        if self.success and self.progress != 1.0:
+            raise ValueError(f"a solved task must report progress 1.0, not {self.progress}")
+        if self.success and self.failure:
+            raise ValueError("a task cannot report success and failure at once")
+
 
 class Task:
     """Base class. Subclasses set the class attributes and implement the hooks."""
