@@ -190,6 +190,27 @@ def test_a_run_saved_on_a_gpu_elsewhere_resumes_on_the_cpu_here(dataset, tmp_pat
     assert all(torch.equal(a[k], b[k]) for k in a)
 
 
+def test_a_training_killed_and_resumed_keeps_the_wall_time_of_its_saved_steps(
+        dataset, tmp_path, interrupt_training):
+    from rmbench.machine import describe
+
+    interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "b", steps=6))
+    path = tmp_path / "b" / "training" / "state.pt"
+    state = torch.load(path, weights_only=True)
+    assert state["step"] == 3 and state["wall_s"] > 0  # the killed piece's saved steps
+    result = train_tiny("act", dataset, tmp_path / "b", steps=6)
+    assert result["train_wall_from"] == 0 and result["machines"] == [describe()]
+    assert state["wall_s"] <= result["train_wall_s"] <= state["wall_s"] + result["wall_s"] + 0.1
+    # a state saved before wall times were kept: they count from the step it resumes at
+    interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "c", steps=6))
+    path = tmp_path / "c" / "training" / "state.pt"
+    state = torch.load(path, weights_only=True)
+    torch.save({k: v for k, v in state.items() if k not in ("wall_s", "wall_from", "machines")},
+               path)
+    result = train_tiny("act", dataset, tmp_path / "c", steps=6)
+    assert result["train_wall_from"] == 3 and result["train_wall_s"] <= result["wall_s"] + 0.1
+
+
 # ------------------------------------------------------------------ checkpoints and the loop
 def test_checkpoint_round_trip_gives_identical_actions(ckpt):
     name, path = ckpt

@@ -3,7 +3,8 @@ training data (its demonstrations; with ``rendered_copies`` their rendered layou
 frozen backbones' features, so that the training jobs beside each other only read them), train
 the cell's checkpoint, evaluate it. Wall times accumulate in each
 folder's ``timing.json`` over the calls that completed a stage's piece (a call killed midway
-loses its own time, not what it saved), with the machines those calls ran on."""
+loses its own time, not what it saved), with the machines those calls ran on; a training's is
+the one its saved state counts (``training.loop.Kept``), every piece up to its last save."""
 
 from __future__ import annotations
 
@@ -36,15 +37,14 @@ def read_json(path: Path, default):
         return default
 
 
-def add_time(folder: Path, key: str, seconds: float, gpu: str | None = None) -> None:
+def add_time(folder: Path, key: str, seconds: float) -> None:
     """Accumulate a stage's wall time in ``folder/timing.json``, and the machine it ran on in
-    ``machines`` (each machine that added time once: a training resumed elsewhere lists two),
-    with the GPU it used if any."""
+    ``machines`` (each machine that added time once)."""
     path = Path(folder) / TIMING
     timing = read_json(path, {})
     timing[key] = round(timing.get(key, 0.0) + seconds, 1)
     machines = timing.setdefault("machines", [])
-    here = describe() if gpu is None else {**describe(), "gpu": gpu}
+    here = describe()
     if here not in machines:
         machines.append(here)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -192,15 +192,6 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
             "layout_copies_wall_s": timing.get("layout_copies_wall_s")}
 
 
-def gpu_name(device: str) -> str | None:
-    """The GPU a training on ``device`` ran on (None on the CPU)."""
-    if device == "cpu":
-        return None
-    import torch
-
-    return torch.cuda.get_device_name(torch.device(device))
-
-
 def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = False) -> Path:
     """The cell's checkpoint (its trained spec's: ``mem0:gt_classifier`` trains ``mem0``),
     resumed from its last saved state; a finished one is left alone."""
@@ -213,9 +204,11 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
         train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=TRAIN_SEED,
                                 save_every=min(500, plan.steps), device=plan.device)
         _, fit = trainable(parse_policy(spec)[0])
-        t0 = time.perf_counter()
-        fit(plan.train_data_dir(out, task), folder, cfg, train_cfg, progress=progress)
-        add_time(folder, "train_wall_s", time.perf_counter() - t0, gpu=gpu_name(plan.device))
+        result = fit(plan.train_data_dir(out, task), folder, cfg, train_cfg, progress=progress)
+        timing = {k: result[k] for k in ("train_wall_s", "machines")}
+        if result["train_wall_from"]:  # the steps before were trained before walls were kept
+            timing["train_wall_from_step"] = result["train_wall_from"]
+        write_atomic(folder / TIMING, (json.dumps(timing, indent=1) + "\n").encode())
     return folder
 
 
@@ -258,6 +251,7 @@ def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | No
             "episodes": result["episodes"], "endings": result["endings"],
             "failure_reasons": failure_reasons(evals / task / "episodes.jsonl"),
             "train_wall_s": train_timing.get("train_wall_s"),
+            "train_wall_from_step": train_timing.get("train_wall_from_step", 0),
             "eval_wall_s": eval_timing.get("eval_wall_s"),
             "machines": {"train": train_timing.get("machines", []),
                          "eval": eval_timing.get("machines", [])},

@@ -13,6 +13,11 @@ batches being a function of the step, gives the weights an uninterrupted run giv
 function the policy passes: its format is the policies', and training sits below them) and
 ``OUT/training/loss.csv`` / ``loss.png`` are derived from it. Under torchrun each rank trains on
 its own episode stream and rank 0 writes.
+
+The state also counts the wall time of the steps it holds, over every piece that saved them
+and the machines they ran on: a training spread over sessions (each killed at its end, then
+resumed) keeps the time of all its saved steps, and loses with a killed piece only the time
+of the steps it had not saved, which it loses too.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from torch import nn
 from tqdm import tqdm
 
 from rmbench.identity import differences
+from rmbench.machine import describe as describe_machine
 from rmbench.training.device import check_device
 from rmbench.video import write_atomic
 
@@ -46,6 +52,22 @@ CURVE_PNG = Path("training") / "loss.png"
 
 class TrainingError(ValueError):
     pass
+
+
+@dataclass(frozen=True)
+class Kept:
+    """What a saved state holds of the work behind it: its step, the wall time of the steps
+    from ``wall_from`` (0, or the step a state saved before wall times were kept resumed at),
+    and the machines that trained them."""
+
+    step: int = 0
+    wall_s: float = 0.0
+    wall_from: int = 0
+    machines: tuple[dict, ...] = ()
+
+    def timing(self) -> dict[str, Any]:
+        return {"train_wall_s": self.wall_s, "train_wall_from": self.wall_from,
+                "machines": [dict(m) for m in self.machines]}
 
 
 @dataclass(frozen=True)
@@ -150,10 +172,15 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     identity = json.loads(json.dumps({"describe": describe, "train": _run_fields(cfg),
                                       "world": dist.world}))
     defaults = json.loads(json.dumps(config_defaults or {}))
-    start = _resume(out, model, opt, identity, defaults, device)
+    kept = _resume(out, model, opt, identity, defaults, device)
+    start = kept.step
     if start >= cfg.steps:
         log.info("%s: already trained for %d steps", out, start)
-        return {"steps": start, "resumed_from": start}
+        return {"steps": start, "resumed_from": start, **kept.timing()}
+    here = describe_machine()
+    if device.type == "cuda":
+        here = {**here, "gpu": torch.cuda.get_device_name(device)}
+    machines = kept.machines + (() if here in kept.machines else (here,))
     # the clip's norm covers what is optimised: a frozen part (Mem-0's planner) is not in it
     trained = [p for g in opt.param_groups for p in g["params"]]
     trainer = (torch.nn.parallel.DistributedDataParallel(model) if dist.world > 1 else model)
@@ -186,20 +213,25 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
             bar.set_postfix(loss=f"{row['loss']:.4f}", refresh=False)
         bar.update(1)
         if (step + 1) % cfg.save_every == 0 or step + 1 == cfg.steps:
+            kept = Kept(step + 1, round(kept.wall_s + time.perf_counter() - t0, 1),
+                        kept.wall_from, machines)
             if lead:
-                _save(out, model, opt, identity, step + 1, rows, write_checkpoint)
+                _save(out, model, opt, identity, kept, rows, write_checkpoint)
                 rows = []
             last_save = step + 1
     bar.close()
     if dist.world > 1:
         torch.distributed.barrier()
     return {"steps": cfg.steps, "resumed_from": start, "saved": last_save,
-            "wall_s": round(time.perf_counter() - t0, 1)}
+            "wall_s": round(time.perf_counter() - t0, 1), **kept.timing()}
 
 
-def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict, step: int,
+def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict, kept: Kept,
           rows: list[dict], write_checkpoint: CheckpointWriter) -> None:
+    step = kept.step
     state = {"step": step, "identity": json.dumps(identity, sort_keys=True),
+             "wall_s": kept.wall_s, "wall_from": kept.wall_from,
+             "machines": json.dumps(kept.machines),
              "model": model.state_dict(), "optimizer": opt.state_dict(),
              "rng": torch.get_rng_state(),
              "extra": model.extra_state() if hasattr(model, "extra_state") else {}}
@@ -215,12 +247,12 @@ def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dic
 
 
 def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict,
-            config_defaults: dict, device: torch.device) -> int:
+            config_defaults: dict, device: torch.device) -> Kept:
     path = out / STATE
     if not path.exists():
         if (out / "config.json").exists() or (out.exists() and any(out.iterdir())):
             raise TrainingError(f"{out} exists and holds no training state; use another --out")
-        return 0
+        return Kept()
     try:
         state = torch.load(path, map_location=device, weights_only=True)
     except Exception as err:
@@ -241,7 +273,11 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
     if hasattr(model, "load_extra_state"):
         model.load_extra_state(state["extra"])
     log.info("%s: resuming at step %d", out, state["step"])
-    return int(state["step"])
+    step = int(state["step"])
+    if "wall_s" not in state:  # saved before wall times were kept: they count from here
+        return Kept(step, 0.0, step)
+    return Kept(step, float(state["wall_s"]), int(state["wall_from"]),
+                tuple(json.loads(state["machines"])))
 
 
 def _append_curve(out: Path, rows: list[dict], step: int) -> None:
