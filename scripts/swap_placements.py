@@ -49,9 +49,12 @@ def placements(env, policy, seed: int, steps: int) -> list[str]:
                              f"{int(np.argmin(to_slots))}")
             elif up[colour] and task.released(cube):
                 up[colour] = False
+                near = int(np.argmin(to_slots))
+                dx, dy = (xy - task.slots[near]) * 100
                 lines.append(f"  {step}: colour {colour} set down "
                              f"{np.linalg.norm(xy - park) * 100:.1f} cm from the parking spot, "
-                             f"{', '.join(f'{d:.1f}' for d in to_slots)} cm from the slots")
+                             f"{', '.join(f'{d:.1f}' for d in to_slots)} cm from the slots "
+                             f"(slot {near} + ({dx:+.1f}, {dy:+.1f}) cm)")
         if terminated or truncated:
             lines.append(f"  {step}: episode over, success {info['is_success']}")
             break
