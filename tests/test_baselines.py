@@ -199,7 +199,7 @@ def test_a_training_killed_and_resumed_keeps_the_wall_time_of_its_saved_steps(
     state = torch.load(path, weights_only=True)
     assert state["step"] == 3 and state["wall_s"] > 0  # the killed piece's saved steps
     result = train_tiny("act", dataset, tmp_path / "b", steps=6)
-    assert result["train_wall_from"] == 0 and result["machines"] == [describe()]
+    assert result["train_wall_from_step"] == 0 and result["machines"] == [describe()]
     assert state["wall_s"] <= result["train_wall_s"] <= state["wall_s"] + result["wall_s"] + 0.1
     # a state saved before wall times were kept: they count from the step it resumes at
     interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "c", steps=6))
@@ -208,7 +208,7 @@ def test_a_training_killed_and_resumed_keeps_the_wall_time_of_its_saved_steps(
     torch.save({k: v for k, v in state.items() if k not in ("wall_s", "wall_from", "machines")},
                path)
     result = train_tiny("act", dataset, tmp_path / "c", steps=6)
-    assert result["train_wall_from"] == 3 and result["train_wall_s"] <= result["wall_s"] + 0.1
+    assert result["train_wall_from_step"] == 3 and result["train_wall_s"] <= result["wall_s"] + 0.1
 
 
 # ------------------------------------------------------------------ checkpoints and the loop

@@ -66,7 +66,7 @@ class Kept:
     machines: tuple[dict, ...] = ()
 
     def timing(self) -> dict[str, Any]:
-        return {"train_wall_s": self.wall_s, "train_wall_from": self.wall_from,
+        return {"train_wall_s": self.wall_s, "train_wall_from_step": self.wall_from,
                 "machines": [dict(m) for m in self.machines]}
 
 
