@@ -176,3 +176,18 @@ def test_report_renders_markdown_and_html(tmp_path):
     assert "| task | TMC | scripted |" in named and "scripted: `expert`" in named
     with pytest.raises(ValueError, match="2 labels for 1 evaluation folders"):
         write_report([tmp_path / "out"], tmp_path / "r.md", [], ["a", "b"])
+
+
+def test_an_analysis_watches_every_step_of_the_evaluated_episode():
+    import rmbench
+    from rmbench.eval.episode import run_policy_episode
+
+    env = rmbench.make(TASK, render=False, obs_type="environment_state_agent_pos")
+    seen = []
+    record = run_policy_episode(env, Faulty(), 100003, on_step=lambda step, info: seen.append(
+        (step, info["progress"])))
+    assert [s for s, _ in seen] == list(range(1, record["steps"] + 1))
+    assert max(p for _, p in seen) == record["progress"]
+    plain = run_policy_episode(env, Faulty(), 100003)  # watching changes nothing
+    assert {k: v for k, v in plain.items() if k != "wall_s"} == \
+        {k: v for k, v in record.items() if k != "wall_s"}

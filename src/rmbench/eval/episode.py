@@ -9,6 +9,7 @@ and the policy's own status where it reports one (``status()``: a Mem-0's subtas
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -33,8 +34,11 @@ def as_chunk(out) -> np.ndarray:
     return a
 
 
-def run_policy_episode(env, policy, seed: int, video: bool = False) -> dict[str, Any]:
-    """Returns the episode's record; ``record["video"]`` holds MP4 bytes when ``video``."""
+def run_policy_episode(env, policy, seed: int, video: bool = False,
+                       on_step: Callable[[int, dict], None] | None = None) -> dict[str, Any]:
+    """Returns the episode's record; ``record["video"]`` holds MP4 bytes when ``video``.
+    ``on_step(step, info)`` after every env step lets an analysis watch the scene of the very
+    episode the evaluation runs (``scripts/swap_placements.py``)."""
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
     u = env.unwrapped
@@ -62,6 +66,8 @@ def run_policy_episode(env, policy, seed: int, video: bool = False) -> dict[str,
                 break
         obs, _, terminated, truncated, info = env.step(queue.pop(0))
         steps += 1
+        if on_step:
+            on_step(steps, info)
         events.update(steps, "task", {"subtask": info.get("subtask", ""),
                                       **info.get("predicates", {})})
         best = max(best, float(info["progress"]))

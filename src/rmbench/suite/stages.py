@@ -205,9 +205,7 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
                                 save_every=min(500, plan.steps), device=plan.device)
         _, fit = trainable(parse_policy(spec)[0])
         result = fit(plan.train_data_dir(out, task), folder, cfg, train_cfg, progress=progress)
-        timing = {k: result[k] for k in ("train_wall_s", "machines")}
-        if result["train_wall_from_step"]:  # the steps before were trained before walls were kept
-            timing["train_wall_from_step"] = result["train_wall_from_step"]
+        timing = {k: result[k] for k in ("train_wall_s", "train_wall_from_step", "machines")}
         write_atomic(folder / TIMING, (json.dumps(timing, indent=1) + "\n").encode())
     return folder
 
