@@ -2,6 +2,7 @@
 damaged, stale or mismatched cache file is solved again rather than trusted, and a dataset
 folder the cache cannot be written to still trains."""
 
+import os
 import shutil
 
 import numpy as np
@@ -61,6 +62,19 @@ def test_copies_are_solved_once_and_read_back(root, solves):
     assert_same(first, again)
     with_copies(root, seed=1)  # another seed draws other shifts: its own file
     assert len(list((root / ".cache").glob("layout-shift-*.npz"))) == 2
+
+
+def test_a_dataset_copied_elsewhere_keeps_its_copies(root, tmp_path, solves):
+    """The cache is named by the data files' bytes, not their times: a copy of the folder
+    (another machine, an archive that keeps whole seconds) reads the copies back."""
+    first = with_copies(root)
+    moved = tmp_path / "moved"
+    shutil.copytree(root, moved)
+    for f in (moved / "data").rglob("*.parquet"):
+        os.utime(f, ns=(10**9, 10**9))
+    solved = len(solves)
+    assert_same(first, with_copies(moved))
+    assert len(solves) == solved + 1  # the first copy solved again as the check, no more
 
 
 def test_copies_solved_across_workers_are_the_ones_training_solves(root, tmp_path, solves):

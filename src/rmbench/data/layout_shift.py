@@ -20,8 +20,9 @@ be over the moved scene, not a new simulation of it.
 Solving the copies takes about two minutes for 16 copies of 50 demonstrations, and every
 policy trained on a dataset asks for the same ones (the seed is the training seed), so
 ``add_layout_copies`` keeps them in ``DATASET/.cache/layout-shift-*.npz``: named by the
-copies, reach, seed, the constants above, MuJoCo's version and each demonstration's data
-file (size and modification time), written atomically, and checked on reading by solving
+copies, reach, seed, the constants above, MuJoCo's version and the bytes of each
+demonstration's data file (so that a dataset copied to another machine, where its files'
+times change, keeps its copies), written atomically, and checked on reading by solving
 the first copy again (a changed robot model or solver fails it). A file that fails any of
 this is solved again and replaced. Each copy is a function of its demonstration and shift
 alone, so ``solve_layout_copies`` solves them across worker processes into the same file: a
@@ -214,11 +215,20 @@ def _load(path: Path, episodes: list[Episode], state_names: tuple[str, ...]
     return copies
 
 
+def _file_digest(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(1 << 20):
+            h.update(block)
+    return h.hexdigest()
+
+
 def cache_path(ds: Dataset, indices: list[int], copies: int, reach: float, seed: int) -> Path:
-    """Where the copies of ``ds``'s episodes ``indices`` are kept (named by their data files,
-    so that finding the cache reads no episode)."""
-    sources = [(e, (s := (ds.root / L.data_file(e)).stat()).st_size, s.st_mtime_ns)
-               for e in indices]
+    """Where the copies of ``ds``'s episodes ``indices`` are kept (named by their data files'
+    bytes, a few megabytes hashed, so that finding the cache decodes no episode)."""
+    files = {e: L.data_file(e) for e in indices}
+    digests = {f: _file_digest(ds.root / f) for f in set(files.values())}
+    sources = [(e, files[e], digests[files[e]]) for e in indices]
     key = json.dumps([CACHE_FORMAT, copies, reach, seed, REST_RADIUS, MAX_MISS,
                       mujoco.__version__, sources])
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
