@@ -176,7 +176,7 @@ def test_a_run_saved_on_a_gpu_elsewhere_resumes_on_the_cpu_here(dataset, tmp_pat
     from safetensors.torch import load_file
 
     train_tiny("act", dataset, tmp_path / "a", steps=6)
-    interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "b", steps=6))
+    interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "b", steps=12))
     # the state a run on a lent GPU machine leaves: its dataset in another folder there, and
     # (as runs saved before the device was left out of a run's identity do) the device named
     path = tmp_path / "b" / "training" / "state.pt"
@@ -194,11 +194,11 @@ def test_a_training_killed_and_resumed_keeps_the_wall_time_of_its_saved_steps(
         dataset, tmp_path, interrupt_training):
     from rmbench.machine import describe
 
-    interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "b", steps=6))
+    interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "b", steps=12))
     path = tmp_path / "b" / "training" / "state.pt"
     state = torch.load(path, weights_only=True)
     assert state["step"] == 3 and state["wall_s"] > 0  # the killed piece's saved steps
-    result = train_tiny("act", dataset, tmp_path / "b", steps=6)
+    result = train_tiny("act", dataset, tmp_path / "b", steps=12)  # three saves in this piece
     assert result["train_wall_from_step"] == 0 and result["machines"] == [describe()]
     assert state["wall_s"] <= result["train_wall_s"] <= state["wall_s"] + result["wall_s"] + 0.1
     # a state saved before wall times were kept: they count from the step it resumes at

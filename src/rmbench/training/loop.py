@@ -189,7 +189,8 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     stream = batches(start, dist.rank, dist.world)
     bar = tqdm(total=cfg.steps, initial=start, unit="step", disable=not (progress and lead),
                desc=f"train {describe.get('policy', '')}", dynamic_ncols=True)
-    t0, last_save = time.perf_counter(), start
+    # this piece's steps are timed from t0 and added to the saved steps' time once, at each save
+    t0, last_save, before = time.perf_counter(), start, kept.wall_s
     model.train()
     for step in range(start, cfg.steps):
         batch = {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v
@@ -213,7 +214,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
             bar.set_postfix(loss=f"{row['loss']:.4f}", refresh=False)
         bar.update(1)
         if (step + 1) % cfg.save_every == 0 or step + 1 == cfg.steps:
-            kept = Kept(step + 1, round(kept.wall_s + time.perf_counter() - t0, 1),
+            kept = Kept(step + 1, round(before + time.perf_counter() - t0, 1),
                         kept.wall_from, machines)
             if lead:
                 _save(out, model, opt, identity, kept, rows, write_checkpoint)
