@@ -225,7 +225,7 @@ def _file_digest(path: Path) -> str:
 
 def cache_path(ds: Dataset, indices: list[int], copies: int, reach: float, seed: int) -> Path:
     """Where the copies of ``ds``'s episodes ``indices`` are kept (named by their data files'
-    bytes, a few megabytes hashed, so that finding the cache decodes no episode)."""
+    bytes, 1-23 MB on the table's datasets: finding the cache decodes no episode)."""
     files = {e: L.data_file(e) for e in indices}
     digests = {f: _file_digest(ds.root / f) for f in set(files.values())}
     sources = [(e, files[e], digests[files[e]]) for e in indices]
