@@ -176,7 +176,7 @@ def test_a_run_saved_on_a_gpu_elsewhere_resumes_on_the_cpu_here(dataset, tmp_pat
     from safetensors.torch import load_file
 
     train_tiny("act", dataset, tmp_path / "a", steps=6)
-    interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "b", steps=12))
+    interrupt_training(lambda: train_tiny("act", dataset, tmp_path / "b", steps=6))
     # the state a run on a lent GPU machine leaves: its dataset in another folder there, and
     # (as runs saved before the device was left out of a run's identity do) the device named
     path = tmp_path / "b" / "training" / "state.pt"
