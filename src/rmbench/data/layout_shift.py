@@ -215,19 +215,11 @@ def _load(path: Path, episodes: list[Episode], state_names: tuple[str, ...]
     return copies
 
 
-def _file_digest(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(1 << 20):
-            h.update(block)
-    return h.hexdigest()
-
-
 def cache_path(ds: Dataset, indices: list[int], copies: int, reach: float, seed: int) -> Path:
     """Where the copies of ``ds``'s episodes ``indices`` are kept (named by their data files'
     bytes, 1-23 MB on the table's datasets: finding the cache decodes no episode)."""
     files = {e: L.data_file(e) for e in indices}
-    digests = {f: _file_digest(ds.root / f) for f in set(files.values())}
+    digests = {f: hashlib.sha256((ds.root / f).read_bytes()).hexdigest() for f in set(files.values())}
     sources = [(e, files[e], digests[files[e]]) for e in indices]
     key = json.dumps([CACHE_FORMAT, copies, reach, seed, REST_RADIUS, MAX_MISS,
                       mujoco.__version__, sources])
