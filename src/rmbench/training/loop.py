@@ -214,8 +214,8 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
             bar.set_postfix(loss=f"{row['loss']:.4f}", refresh=False)
         bar.update(1)
         if (step + 1) % cfg.save_every == 0 or step + 1 == cfg.steps:
-            kept = Kept(step + 1, round(before + time.perf_counter() - t0, 1),
-                        kept.wall_from, machines)
+            # unrounded: a short piece's steps would otherwise count as no time at all
+            kept = Kept(step + 1, before + time.perf_counter() - t0, kept.wall_from, machines)
             if lead:
                 _save(out, model, opt, identity, kept, rows, write_checkpoint)
                 rows = []
