@@ -107,6 +107,23 @@ def test_temporal_ensembling_weights_the_oldest_prediction_most():
     assert len(policy.ensemble.chunks) == 4
 
 
+def test_an_ensemble_window_averages_only_the_latest_chunks():
+    torch.manual_seed(0)
+    from rmbench.policies.act.modeling import ACTModel
+
+    cfg = replace(TINY_ACT, horizon=4, temporal_ensemble=0.5, ensemble_window=2)
+    policy = ACTPolicy.from_model(ACTModel(cfg))
+    chunks = iter([np.full((4, 14), v) for v in (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)])
+    policy.chunk = lambda state: next(chunks)
+    out = [policy.schedule(None)[0] for policy.t in range(6)]
+    w = np.exp(-0.5 * np.arange(2))
+    # at step 5 only the chunks of steps 4 and 5 vote; those of steps 2 and 3 still cover it
+    assert out[5] == pytest.approx((w @ [5, 6]) / w.sum())
+    for window in (-1, 5):
+        with pytest.raises(ValueError, match="ensemble_window"):
+            replace(TINY_ACT, horizon=4, ensemble_window=window)
+
+
 # ------------------------------------------------------------------ training
 def sampled_action_error(policy, dataset) -> float:
     """Mean |predicted - demonstrated| over the first ``execute`` actions of every frame,

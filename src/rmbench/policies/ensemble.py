@@ -12,11 +12,16 @@ import numpy as np
 
 
 class TemporalEnsemble:
-    def __init__(self, horizon: int, m: float):
-        if horizon < 1 or m < 0:
-            raise ValueError(f"temporal ensembling needs horizon >= 1 and m >= 0, got "
-                             f"{horizon} and {m}")
-        self.horizon, self.m = horizon, m
+    """``window``: only the chunks predicted in the last ``window`` steps vote (default: every
+    chunk still covering the step). How far back the votes reach is how much of its own past
+    the policy acts on, a memory of that many steps."""
+
+    def __init__(self, horizon: int, m: float, window: int | None = None):
+        window = horizon if window is None else window
+        if horizon < 1 or m < 0 or not 1 <= window <= horizon:
+            raise ValueError(f"temporal ensembling needs horizon >= 1, m >= 0 and a window of "
+                             f"1 to horizon steps, got {horizon}, {m} and {window}")
+        self.horizon, self.m, self.window = horizon, m, window
         self.chunks: list[tuple[int, np.ndarray]] = []  # (step predicted at, chunk), oldest first
 
     def reset(self) -> None:
@@ -29,9 +34,9 @@ class TemporalEnsemble:
         self.chunks.append((t, chunk))
 
     def action(self, t: int) -> np.ndarray:
-        """The weighted mean of every stored chunk's action for step ``t``; chunks that end
-        before t are dropped."""
-        self.chunks = [(t0, c) for t0, c in self.chunks if 0 <= t - t0 < self.horizon]
+        """The weighted mean of the action for step ``t`` of every stored chunk predicted in
+        the window; older chunks are dropped."""
+        self.chunks = [(t0, c) for t0, c in self.chunks if 0 <= t - t0 < self.window]
         if not self.chunks:
             raise RuntimeError(f"no stored chunk covers step {t}")
         predictions = np.stack([c[t - t0] for t0, c in self.chunks])

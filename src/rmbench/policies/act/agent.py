@@ -1,6 +1,6 @@
-"""``--policy act:CKPT[?temporal_ensemble=M&execute=N]``: ACT's closed loop, with temporal
-ensembling (policies/ensemble.py): a chunk every step, and the current step's action the
-weighted mean of every chunk's prediction for it."""
+"""``--policy act:CKPT[?temporal_ensemble=M&ensemble_window=K&execute=N]``: ACT's closed loop,
+with temporal ensembling (policies/ensemble.py): a chunk every step, and the current step's
+action the weighted mean of every chunk's prediction for it (of the last K steps' chunks)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,8 @@ class ACTPolicy(VisuomotorPolicy):
 
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
         super().reset(instruction, task_info)
-        self.ensemble = TemporalEnsemble(self.cfg.horizon, self.cfg.temporal_ensemble)
+        self.ensemble = TemporalEnsemble(self.cfg.horizon, self.cfg.temporal_ensemble,
+                                         self.cfg.ensemble_window or None)
 
     def schedule(self, state: torch.Tensor) -> np.ndarray:
         if self.cfg.temporal_ensemble <= 0:

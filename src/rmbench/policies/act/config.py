@@ -20,6 +20,10 @@ class ACTConfig(VisuomotorConfig):
     """m in the ensembling weights exp(-m i) (i = 0 the oldest prediction): a chunk is predicted
     every step and the predictions for the current step averaged. 0: no ensembling; execute
     ``execute`` actions per chunk."""
+    ensemble_window: int = 0
+    """Only the chunks predicted in the last this many steps are averaged (0: every chunk that
+    covers the step, ``horizon`` steps back). The ensemble acts on that much of the past, so
+    it is a memory of that many steps; battery_try's state-table reading measures it."""
     dim: int = 128
     """Transformer width (the paper's 512, CPU-sized); the CNN's feature maps project to it."""
     heads: int = 4
@@ -35,7 +39,8 @@ class ACTConfig(VisuomotorConfig):
     kl_weight: float = 10.0
     """beta on the KL term beside the L1 action loss."""
 
-    INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "temporal_ensemble")
+    INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "temporal_ensemble",
+                                                   "ensemble_window")
 
     def __post_init__(self):
         super().__post_init__()
@@ -45,3 +50,6 @@ class ACTConfig(VisuomotorConfig):
             raise ValueError(f"dim {self.dim} must be divisible by heads {self.heads}")
         if self.temporal_ensemble < 0:
             raise ValueError("temporal_ensemble must be >= 0 (0 turns it off)")
+        if not 0 <= self.ensemble_window <= self.horizon:
+            raise ValueError(f"ensemble_window must be 0 (the whole horizon) to horizon "
+                             f"({self.horizon}), got {self.ensemble_window}")
