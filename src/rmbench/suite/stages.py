@@ -42,7 +42,7 @@ def add_time(folder: Path, key: str, seconds: float) -> None:
     ``machines`` (each machine that added time once)."""
     path = Path(folder) / TIMING
     timing = read_json(path, {})
-    timing[key] = round(timing.get(key, 0.0) + seconds, 1)
+    timing[key] = timing.get(key, 0.0) + seconds  # unrounded: short stages add up
     machines = timing.setdefault("machines", [])
     here = describe()
     if here not in machines:
