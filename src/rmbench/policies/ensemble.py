@@ -1,5 +1,6 @@
 """Temporal ensembling of action chunks (ACT, Zhao et al. 2023): every stored chunk that covers
-the current step votes for its action, the oldest weighted most (exp(-m i), i = 0 the oldest).
+the current step (or, with a window, every one predicted in its last steps) votes for its
+action, the oldest weighted most (exp(-m i), i = 0 the oldest).
 
 Averaging the overlapping predictions smooths the switch from one chunk to the next, where a
 policy that runs each chunk open-loop jumps; with m > 0 a fresh chunk moves the action only
@@ -12,16 +13,15 @@ import numpy as np
 
 
 class TemporalEnsemble:
-    """``window``: only the chunks predicted in the last ``window`` steps vote (default: every
-    chunk still covering the step). How far back the votes reach is how much of its own past
-    the policy acts on, a memory of that many steps."""
+    """``window``: only the chunks predicted in the last ``window`` steps vote (0: every chunk
+    still covering the step, ``horizon`` steps back). How far back the votes reach is how much
+    of its own past the policy acts on, a memory of that many steps."""
 
-    def __init__(self, horizon: int, m: float, window: int | None = None):
-        window = horizon if window is None else window
-        if horizon < 1 or m < 0 or not 1 <= window <= horizon:
+    def __init__(self, horizon: int, m: float, window: int = 0):
+        if horizon < 1 or m < 0 or not 0 <= window <= horizon:
             raise ValueError(f"temporal ensembling needs horizon >= 1, m >= 0 and a window of "
-                             f"1 to horizon steps, got {horizon}, {m} and {window}")
-        self.horizon, self.m, self.window = horizon, m, window
+                             f"0 (the horizon) to horizon steps, got {horizon}, {m} and {window}")
+        self.horizon, self.m, self.window = horizon, m, window or horizon
         self.chunks: list[tuple[int, np.ndarray]] = []  # (step predicted at, chunk), oldest first
 
     def reset(self) -> None:

@@ -23,7 +23,7 @@ class ACTPolicy(VisuomotorPolicy):
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
         super().reset(instruction, task_info)
         self.ensemble = TemporalEnsemble(self.cfg.horizon, self.cfg.temporal_ensemble,
-                                         self.cfg.ensemble_window or None)
+                                         self.cfg.ensemble_window)
 
     def schedule(self, state: torch.Tensor) -> np.ndarray:
         if self.cfg.temporal_ensemble <= 0:
