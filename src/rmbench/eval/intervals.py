@@ -1,0 +1,56 @@
+"""95% intervals for success rates measured over a finite number of episodes.
+
+A cell of 100 episodes at 20% has a Wilson 95% interval of about 13-29%: two cells 3 points
+apart are usually the same policy. Every rate rmbench reports carries its interval, and every
+comparison of two cells carries the interval of their difference.
+
+- ``wilson``: the Wilson score interval for one binomial rate (keeps inside [0, 1] and stays
+  informative at 0/100 and 100/100, where the normal approximation collapses to a point).
+- ``difference``: Newcombe's hybrid score interval (method 10) for the difference of two
+  independent rates, built from the two Wilson intervals.
+"""
+
+from __future__ import annotations
+
+import math
+
+Z95 = 1.959963984540054  # the standard normal's 97.5% quantile
+
+
+def wilson(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """(low, high) of the Wilson score interval for ``successes`` out of ``n``, as fractions."""
+    if n <= 0:
+        raise ValueError(f"an interval needs at least one episode, got n={n}")
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes={successes} outside [0, n={n}]")
+    p = successes / n
+    z2 = z * z
+    centre = (p + z2 / (2 * n)) / (1 + z2 / n)
+    half = z * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / (1 + z2 / n)
+    # The exact ends are 0 and 1 at 0/n and n/n; rounding must not leave them a hair inside.
+    low = 0.0 if successes == 0 else max(0.0, centre - half)
+    high = 1.0 if successes == n else min(1.0, centre + half)
+    return low, high
+
+
+def difference(k1: int, n1: int, k2: int, n2: int, z: float = Z95) -> tuple[float, float, float]:
+    """(d, low, high) for d = k1/n1 - k2/n2, Newcombe's hybrid score interval, as fractions."""
+    p1, p2 = k1 / n1 if n1 else 0.0, k2 / n2 if n2 else 0.0
+    l1, u1 = wilson(k1, n1, z)
+    l2, u2 = wilson(k2, n2, z)
+    d = p1 - p2
+    low = d - math.sqrt((p1 - l1) ** 2 + (u2 - p2) ** 2)
+    high = d + math.sqrt((u1 - p1) ** 2 + (p2 - l2) ** 2)
+    return d, max(-1.0, low), min(1.0, high)
+
+
+def outside_noise(k1: int, n1: int, k2: int, n2: int, z: float = Z95) -> bool:
+    """True when the difference's 95% interval excludes zero."""
+    _, low, high = difference(k1, n1, k2, n2, z)
+    return low > 0 or high < 0
+
+
+def format_rate(successes: int, n: int) -> str:
+    """'20 [13, 29]': the rate and its 95% interval in percent, as the docs print them."""
+    low, high = wilson(successes, n)
+    return f"{100 * successes / n:.0f} [{100 * low:.0f}, {100 * high:.0f}]"
