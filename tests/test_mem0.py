@@ -87,8 +87,8 @@ def test_debounce_needs_l_consecutive_positives():
 def test_end_labels_mark_the_last_l_frames_of_each_subtask():
     idx = np.array([0, 0, 0, 0, 1, 1, 2, 2, 2])
     assert end_labels(idx, 2).tolist() == [0, 0, 1, 1, 1, 1, 0, 1, 1]
-    assert runs(idx) == [(0, 3), (1, 5), (2, 8)]
-    ex = planner_examples(7, idx, done_index=9)
+    assert runs(idx, idx) == [(0, 3), (1, 5), (2, 8)]
+    ex = planner_examples(7, idx, idx, done_index=9)
     assert [x.target for x in ex] == [0, 1, 2, 9]
     assert ex[2].keys == ((0, 3), (1, 5)) and ex[2].current == 5
 

@@ -108,9 +108,12 @@ def _check_data(path, features, e, n, first, ds) -> np.ndarray:
     sub = column(table, L.SUBTASK_INDEX)
     if not np.isin(sub, np.arange(len(ds.subtasks))).all():
         _fail(f"{path}: subtask_index outside the {len(ds.subtasks)} subtasks of {L.SUBTASKS}")
+    step = column(table, L.SUBTASK_STEP)
+    if n and (step[0] != 0 or (np.diff(step) < 0).any()):
+        _fail(f"{path}: subtask_step does not count the plan's steps up from 0")
     ends = column(table, L.SUBTASK_END).astype(bool)
-    if not np.array_equal(ends, subtask_ends(sub)):
-        _fail(f"{path}: subtask_end flags do not mark the last frame of each subtask")
+    if not np.array_equal(ends, subtask_ends(step)):
+        _fail(f"{path}: subtask_end flags do not mark the last frame of each plan step")
     return ends
 
 
