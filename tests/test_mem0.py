@@ -73,7 +73,14 @@ def test_anchor_is_the_first_frame_of_the_subtask_and_stays(mn_ckpt):
     policy.act(obs)
     tokens, _ = ex.encode(policy.inputs(obs))
     assert torch.allclose(policy.memory.anchor[0], tokens[0])
-    assert int(policy.memory.valid.sum()) <= 1
+    # The window is filled on the subtask's own phase, as training walks it: the subtask's
+    # first frame (here the episode's sixth, odd) is pushed, then every memory_every-th.
+    assert policy.t == 6 and int(policy.memory.valid.sum()) == 1
+    filled = []
+    for _ in range(4):
+        policy.act(obs)
+        filled.append(int(policy.memory.valid.sum()))
+    assert TINY.memory_every == 2 and filled == [1, 2, 2, 3]
     env.close()
 
 
