@@ -190,7 +190,8 @@ def state_cost() -> str:
 # ------------------------------------------------------------------ put_back_block, state
 STATE_RUNS = [
     ("learning_state_put_back_block_white0.02.json", "relative targets, 12,000 steps"),
-    ("learning_state_put_back_block_no_state_noise.json", "absolute targets, action patches of 3, 18,000 steps"),
+    ("learning_state_put_back_block_no_state_noise.json",
+     "absolute targets, action patches of 3, 18,000 steps"),
     ("learning_state_put_back_block.json", "+ 1 cm noise on every position"),
     ("learning_state_put_back_block_mats0.02.json", "2 cm noise on the mats alone"),
     ("learning_state_put_back_block_grasp_pose.json", "+ grasp poses as input"),
@@ -265,13 +266,15 @@ def robustness() -> str:
     cells = _robustness_cells()
     rows = []
     for task in ordered():
-        rows.append([task.name] + [rate(cells.get((task.name, k, s))) + f" ({cells[(task.name, k, s)]['episodes']})"
-                                   if (task.name, k, s) in cells else "-" for k, s in ROBUSTNESS_COLUMNS])
+        row = [cells.get((task.name, k, s)) for k, s in ROBUSTNESS_COLUMNS]
+        rows.append([task.name] + [f"{rate(c)} ({c['episodes']})" if c else "-" for c in row])
     raised = sum(c["expert_raised"] for c in cells.values())
     episodes = sum(c["episodes"] for c in cells.values())
+    wall = sum(c["wall_s"] for c in cells.values())
     head = [f"{k} {s:g}" if s else "no noise" for k, s in ROBUSTNESS_COLUMNS]
     return (markdown(["task", *head], rows)
-            + f"\nEpisodes: {episodes}, in which an expert raised: {raised}. In parentheses: episodes per cell.\n")
+            + f"\nEpisodes: {episodes}, in which an expert raised: {raised}; wall time of the "
+            f"{len(cells)} cells: {wall / 3600:.1f} h. In parentheses: episodes per cell.\n")
 
 
 def robustness_margin() -> str:
@@ -328,14 +331,16 @@ def speed() -> str:
         ["bare MuJoCo render of the same cameras, sets/s",
          f"{sim['bare_render_sets_per_s']} (env / bare {sim['ratio_env_to_bare_render']:.2f})", "same run"],
         ["env steps/s, physics only", f"{sim['env_steps_per_s_physics_only']:.0f}", "same run"],
-        [f"50 {collect['task']} demonstrations, {collect['cameras']} cameras {collect['resolution']}, 2 workers",
+        [f"50 {collect['task']} demonstrations, {collect['cameras']} cameras "
+         f"{collect['resolution']}, 2 workers",
          f"{collect['time_for_50_demos_s']:.0f} s ({two['demos_per_min']:.1f} demos/min; "
          f"{one['demos_per_min']:.1f} with 1 worker)", "`benchmarks/collect_speed.py`"],
         ["recorder overhead vs the expert with cameras, nothing saved",
          f"{one['overhead']:.2f}x (seed search + replay), {direct['overhead']:.2f}x (direct)", "same run"],
-        ["dataset size per demonstration", f"{one['mb_per_demo']:.2f} MB ({one['frames_per_demo']:.0f} frames)",
-         "same run"],
-        ["evaluation harness vs bare env, `noop` policy", f"{ev['harness_vs_bare']:.2f}x", "`benchmarks/eval_speed.py`"],
+        ["dataset size per demonstration",
+         f"{one['mb_per_demo']:.2f} MB ({one['frames_per_demo']:.0f} frames)", "same run"],
+        ["evaluation harness vs bare env, `noop` policy", f"{ev['harness_vs_bare']:.2f}x",
+         "`benchmarks/eval_speed.py`"],
         [f"closed loop, {pol['inference_threads']} thread, {len(pol['cameras'])} cameras, Hz",
          f"Mem-0 {p['mem0']['hz']} (planner {p['mem0']['planner_ms']} ms), DP {p['dp']['hz']}, "
          f"ACT {p['act']['hz']}", "`benchmarks/policy_speed.py`"],
