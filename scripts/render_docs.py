@@ -187,6 +187,17 @@ def state_cost() -> str:
     return markdown(["what", "cells", "wall time"], rows)
 
 
+def eval_walls() -> str:
+    """What 100 episodes of a task take to evaluate: the state table's cells, one worker."""
+    res = load("table_state.json")
+    rows = []
+    for task in ordered():
+        row = res["cells"][task.name]
+        rows.append([task.name, task.step_limit,
+                     *(minutes(row[s]["eval_wall_s"]) for s in ("mem0", "dp", "act"))])
+    return markdown(["task", "step limit", "Mem-0", "DP", "ACT"], rows)
+
+
 # ------------------------------------------------------------------ put_back_block, state
 STATE_RUNS = [
     ("learning_state_put_back_block_white0.02.json", "relative targets, 12,000 steps"),
@@ -354,7 +365,7 @@ def speed() -> str:
 TABLES: dict[str, Callable[[], str]] = {
     "readme-results": readme_results, "state-policies": state_policies,
     "state-ablations": state_ablations, "state-records": state_records,
-    "state-superseded": state_superseded, "state-cost": state_cost,
+    "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,
     "learning-state": learning_state, "learning-state-more": learning_state_more,
     "learning-pixels": learning_pixels, "robustness": robustness,
     "robustness-margin": robustness_margin, "robustness-failures": robustness_failures,
