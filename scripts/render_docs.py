@@ -362,6 +362,38 @@ def speed() -> str:
     return markdown(["what", "figure", "command"], rows)
 
 
+def policy_speed() -> str:
+    pol = load("policy_speed.json")
+    rows = []
+    for name, p in pol["policies"].items():
+        rows.append([COLUMN[name], f"{p['step_ms']:.1f}", f"{p['hz']}", f"{p['params'] / 1e6:.1f} M",
+                     f"{p['planner_ms']} ms" if "planner_ms" in p else "—",
+                     f"{p['memory_store_floats']:,}" if "memory_store_floats" in p else "—",
+                     f"{p['rss_growth_mb']} MB", f"{p['train_steps_per_s']}"])
+    return markdown(["policy", "closed-loop step (ms)", "Hz", "parameters", "planner call (8 keys)",
+                     "memory store (floats)", f"RSS growth over {pol['steps']} steps",
+                     f"training steps/s ({pol['training_threads']} threads, batch {pol['batch_size']})"],
+                    rows)
+
+
+def backbone_speed() -> str:
+    """Mem-0's training on cached frozen-backbone features against on frames with its CNNs."""
+    rows = []
+    for name, label in (("policy_speed_backbone.json", "default head"),
+                        ("policy_speed_backbone_recipe_b128.json", "the state recipe's head")):
+        d = load(name)
+        res = d["results"]
+        cnn = res["cnn"]["mem0"]["train_steps_per_s"]
+        for case in ("stride8", "stride16", "stride32"):
+            r = res[case]
+            rows.append([f"{label}, batch {d['batch_size']}", case.replace("stride", "stride "),
+                         f"{r['mem0']['train_steps_per_s']} ({r['mem0']['train_steps_per_s'] / cnn:.1f}x "
+                         f"of {cnn} on frames)", f"{r['mem0']['step_ms']:.1f}", f"{r['dp']['step_ms']:.1f}",
+                         f"{r['act']['step_ms']:.1f}", f"{r['encode_frames_per_s']:.0f}"])
+    return markdown(["Mem-0", "feature map", "training steps/s, 1 thread", "Mem-0 step (ms)",
+                     "DP step (ms)", "ACT step (ms)", "cache: frames encoded/s"], rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "readme-results": readme_results, "state-policies": state_policies,
     "state-ablations": state_ablations, "state-records": state_records,
@@ -369,7 +401,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "learning-state": learning_state, "learning-state-more": learning_state_more,
     "learning-pixels": learning_pixels, "robustness": robustness,
     "robustness-margin": robustness_margin, "robustness-failures": robustness_failures,
-    "aliasing": aliasing, "speed": speed,
+    "aliasing": aliasing, "speed": speed, "policy-speed": policy_speed,
+    "backbone-speed": backbone_speed,
 }
 
 
