@@ -199,27 +199,37 @@ def eval_walls() -> str:
 
 
 # ------------------------------------------------------------------ put_back_block, state
-STATE_RUNS = [
-    ("learning_state_put_back_block_white0.02.json", "relative targets, 12,000 steps"),
-    ("learning_state_put_back_block_no_state_noise.json",
-     "absolute targets, action patches of 3, 18,000 steps"),
-    ("learning_state_put_back_block.json", "+ 1 cm noise on every position"),
-    ("learning_state_put_back_block_mats0.02.json", "2 cm noise on the mats alone"),
-    ("learning_state_put_back_block_grasp_pose.json", "+ grasp poses as input"),
-    ("learning_state_put_back_block_layout_copies.json",
-     "+ 16 layout copies (4 cm), deterministic sampling: **the recipe**"),
-]
+# the milestones of the recipe search, in order; each row shows what its --set changed
+STATE_RUNS = ["learning_state_put_back_block_white0.02.json",
+              "learning_state_put_back_block_no_state_noise.json",
+              "learning_state_put_back_block.json",
+              "learning_state_put_back_block_mats0.02.json",
+              "learning_state_put_back_block_grasp_pose.json",
+              "learning_state_put_back_block_layout_copies.json"]
+
+
+def _recipe_change(before: dict | None, run: dict) -> str:
+    """What ``run``'s recipe changed from ``before``'s: its new or changed ``--set`` items and
+    its steps if they differ (the whole recipe for the first row)."""
+    old = dict(x.split("=", 1) for x in before["set"]) if before else {}
+    new = dict(x.split("=", 1) for x in run["set"])
+    parts = [f"`{k}={v}`" for k, v in new.items() if old.get(k) != v]
+    parts += [f"without `{k}`" for k in old if k not in new]
+    if before is None or before["steps"] != run["steps"]:
+        parts.append(f"{run['steps']:,} steps")
+    return ("" if before is None else "+ ") + ", ".join(parts)
 
 
 def learning_state() -> str:
     specs = ["mem0", "mem0:no_memory", "mem0:no_anchor", "mem0:no_sliding"]
-    rows = []
-    for name, change in STATE_RUNS:
+    rows, before = [], None
+    for name in STATE_RUNS:
         d = load(name)
         p = d["policies"]
-        rows.append([change, f"`{Path(name).stem}`", *(rate(p.get(s)) for s in specs),
+        rows.append([_recipe_change(before, d), f"`{Path(name).stem}`", *(rate(p.get(s)) for s in specs),
                      minutes(p["mem0"].get("train_wall_s"))])
-    return markdown(["recipe (each row changes the one above)", "results JSON",
+        before = d
+    return markdown(["recipe (`--set`; each row changes the one above)", "results JSON",
                      *(COLUMN[s] for s in specs), "Mem-0 train wall"], rows)
 
 
