@@ -180,9 +180,9 @@ def state_cost() -> str:
     partial = sum(1 for c in trained if c["train_wall_from_step"])
     gpu = sum(1 for c in trained if any(m.get("gpu") for m in c["machines"]["train"]))
     evals = [c["eval_wall_s"] for _, c in cells if c["eval_wall_s"] is not None]
-    rows = [["trainings (18,000 steps each)", str(len(trained)), f"{sum(kept) / 3600:.1f} h kept"],
+    rows = [["trainings (18,000 steps each)", str(len(trained)), f"{sum(kept) / 3600:.1f} h kept (CPU and GPU pieces together)"],
             ["of them timed from a resumed step (the earlier pieces' walls not kept)", str(partial), ""],
-            ["of them partly on a GPU", str(gpu), ""],
+            ["of them wholly or partly on a GPU", str(gpu), ""],
             ["evaluations (100 episodes each)", str(len(evals)), f"{sum(evals) / 3600:.1f} h"]]
     return markdown(["what", "cells", "wall time"], rows)
 
