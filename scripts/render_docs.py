@@ -24,6 +24,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from rmbench.eval.chance import chance
 from rmbench.eval.intervals import format_rate
 from rmbench.eval.report import PUBLISHED
 from rmbench.suite.plan import applies
@@ -61,6 +62,14 @@ def markdown(header: list[str], rows: list[list[str]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(str(v) for v in r) + " |" for r in rows]
     return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------ the tasks
+def tasks() -> str:
+    """The nine tasks as the registry defines them, each with its chance level without memory."""
+    rows = [[t.name, f"`{t.gym_id}`", t.tmc, t.step_limit, t.aliasing_point,
+             f"{100 * chance(t.name).rate:.1f}%"] for t in ordered()]
+    return markdown(["task", "gym id", "TMC", "step limit", "where only memory tells", "chance"], rows)
 
 
 # ------------------------------------------------------------------ the state table
@@ -180,7 +189,8 @@ def state_cost() -> str:
     partial = sum(1 for c in trained if c["train_wall_from_step"])
     gpu = sum(1 for c in trained if any(m.get("gpu") for m in c["machines"]["train"]))
     evals = [c["eval_wall_s"] for _, c in cells if c["eval_wall_s"] is not None]
-    rows = [["trainings (18,000 steps each)", str(len(trained)), f"{sum(kept) / 3600:.1f} h kept (CPU and GPU pieces together)"],
+    rows = [["trainings (18,000 steps each)", str(len(trained)),
+             f"{sum(kept) / 3600:.1f} h kept (CPU and GPU pieces together)"],
             ["of them timed from a resumed step (the earlier pieces' walls not kept)", str(partial), ""],
             ["of them wholly or partly on a GPU", str(gpu), ""],
             ["evaluations (100 episodes each)", str(len(evals)), f"{sum(evals) / 3600:.1f} h"]]
@@ -405,6 +415,7 @@ def backbone_speed() -> str:
 
 
 TABLES: dict[str, Callable[[], str]] = {
+    "tasks": tasks,
     "readme-results": readme_results, "state-policies": state_policies,
     "state-ablations": state_ablations, "state-records": state_records,
     "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,
