@@ -1,6 +1,6 @@
 """``rmbench serve``: a policy behind a websocket, one policy instance per connection.
 
-Protocol (docs/policy_server.md): on connect the server sends its metadata; then each client
+Protocol (docs/guides/policy_server.md): on connect the server sends its metadata; then each client
 message is a msgpack map. ``{"reset": true, "instruction": str, "task_info": {...}}`` resets
 the policy and is answered ``{"ok": true}``; any other map is an observation, answered
 ``{"actions": (k, 14) float64}``. A malformed message or a failing policy is answered
