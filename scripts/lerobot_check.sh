@@ -47,18 +47,18 @@ step "an rmbench dataset: 3 demonstrations, the head camera"
 rmbench collect "$TASK" --episodes 3 --seed 0 --cameras head --out "$WORK/data"
 rmbench dataset check "$WORK/data"
 
-step "lerobot-train: ACT, 20 steps, on the rmbench dataset as it is"
+step "lerobot-train: ACT, 5 steps, on the rmbench dataset as it is"
 lerobot-train --dataset.repo_id=rmbench/"$TASK" --dataset.root="$WORK/data" \
     --policy.type=act --policy.pretrained_backbone_weights=null --policy.device=cpu \
     --policy.push_to_hub=false --policy.chunk_size=20 --policy.n_action_steps=20 \
-    --steps=20 --batch_size=4 --num_workers=0 --save_freq=20 --log_freq=10 \
+    --steps=5 --batch_size=4 --num_workers=0 --save_freq=5 --log_freq=5 \
     --eval_freq=0 --wandb.enable=false --output_dir="$WORK/train"
 CKPT="$WORK/train/checkpoints/last/pretrained_model"
 
 step "lerobot-eval: one rmbench episode (rmbench's first verified seed, its success)"
 lerobot-eval --policy.path="$CKPT" --policy.device=cpu \
     --env.discover_packages_path=rmbench.lerobot --env.type=rmbench --env.task="$TASK" \
-    --env.cameras=head --eval.n_episodes=1 --eval.batch_size=1 --seed=0 --output_dir="$WORK/lerobot_eval"
+    --env.cameras=head --env.obs_type=pixels_environment_state_agent_pos --eval.n_episodes=1 --eval.batch_size=1 --seed=0 --output_dir="$WORK/lerobot_eval"
 
 step "rmbench eval of the same checkpoint (lerobot: spec), the same episode"
 rmbench eval --task "$TASK" --policy "lerobot:$CKPT" --episodes 1 --seed 0 --video none \
@@ -83,13 +83,12 @@ import sys
 from pathlib import Path
 
 work = Path(sys.argv[1])
-lerobot = json.loads((work / "lerobot_eval" / "eval_info.json").read_text())
-episode = lerobot["per_episode"][0]
+metrics = json.loads((work / "lerobot_eval" / "eval_info.json").read_text())["per_task"][0]["metrics"]
+episode = {"success": metrics["successes"][0], "sum_reward": metrics["sum_rewards"][0]}
 records = {name: json.loads((work / name / "put_back_block" / "episodes.jsonl").read_text()
                             .splitlines()[0]) for name in ("rmbench_eval", "remote_eval")}
 # rmbench's reward is the increase of the task's progress: an episode's return is its best
-print(f"lerobot-eval: success {episode['success']}, return {episode['sum_reward']:.6f} "
-      f"(episode seed {episode['seed']})")
+print(f"lerobot-eval: success {episode['success']}, return {episode['sum_reward']:.6f}")
 for name, r in records.items():
     print(f"{name}: success {r['success']}, best progress {r['progress']} on rmbench seed "
           f"{r['seed']} ({r['reason']}, {r['steps']} steps)")
