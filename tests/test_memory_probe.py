@@ -222,6 +222,24 @@ def test_an_evaluation_runs_the_probe_beside_the_plain_arm(lookup, tmp_path):
     # a later evaluation without the probe keeps its result in the summary
     again = evaluate(EvalConfig((TASK,), "test_lookup", tmp_path / "out", **common))
     assert again["tasks"][TASK]["memory_reset"]["aliasing"] == probe
+    # the results JSON beside a memoryless control cell (0 of 100 here)
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "memory_probe.py"
+    spec = importlib.util.spec_from_file_location("memory_probe_benchmark", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    ref = tmp_path / "ref.json"
+    ref.write_text(json.dumps({"policies": {"mem0:no_memory": {"success_rate": 0.0,
+                                                                "episodes": 100}}}))
+    assert bench.main(["--eval", str(tmp_path / "out"), "--task", TASK, "--reference", str(ref),
+                       "--out", str(tmp_path / "r.json")]) == 0
+    res = json.loads((tmp_path / "r.json").read_text())
+    assert res["with"]["successes"] == 1 and res["reference"]["successes"] == 0
+    assert res["with_minus_reference"]["difference"] == 1.0
+    assert res["reference"]["success_ci95"] == [0.0, 0.037]
 
 
 def test_the_probe_resets_a_served_policy_over_the_wire(lookup):
