@@ -208,6 +208,8 @@ def test_learning_benchmark_is_the_table_for_one_task(toy_table, tmp_path):
     table = json.loads((out / "table.json").read_text())["cells"]["observe_and_pickup"]
     for spec_ in ("mem0", "dp"):
         assert res["policies"][spec_]["success_rate"] == table[spec_]["success_rate"]
+        k = res["policies"][spec_]["successes"]  # of 1 episode: Wilson's interval
+        assert res["policies"][spec_]["success_ci95"] == ([0.2065, 1.0] if k else [0.0, 0.7935])
     assert res["dataset"]["episodes"] == 2 and res["noise"] is None
     with pytest.raises(SystemExit, match="unknown policy"):
         learning.main(["--task", "observe_and_pickup", "--obs", "state", "--policies", "pi0"])

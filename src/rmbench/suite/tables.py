@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.eval.chance import chance
-from rmbench.eval.intervals import difference, outside_noise, wilson
+from rmbench.eval.intervals import difference, outside_noise
 from rmbench.eval.report import PUBLISHED, Rate, format_cell, table
 from rmbench.machine import describe, short
 from rmbench.suite.plan import Plan, applies
@@ -39,12 +39,7 @@ def results(plan: Plan, out: Path, command: str = "",
     machine."""
     cells: dict[str, dict[str, Any]] = {}
     for task, spec in plan.cells():
-        row = cell_row(plan, out, task, spec)
-        if row is not None:
-            rate = Rate.of(row)
-            row["successes"] = rate.successes
-            row["success_ci95"] = [round(v, 4) for v in wilson(rate.successes, rate.episodes)]
-        cells.setdefault(task, {})[spec] = row
+        cells.setdefault(task, {})[spec] = cell_row(plan, out, task, spec)
     collect = {t: read_json(Path(out) / t / TIMING, {}).get("collect_wall_s") for t in cells}
     levels = {t: asdict(chance(t)) for t in cells}
     return {"command": command, "plan": plan.to_dict(), "cells": cells, "chance": levels,
