@@ -93,7 +93,12 @@ for name, r in records.items():
     print(f"{name}: success {r['success']}, best progress {r['progress']} on rmbench seed "
           f"{r['seed']} ({r['reason']}, {r['steps']} steps)")
 for name, r in records.items():
+    if r["reason"] == "policy_error":
+        sys.exit(f"lerobot_check: {name} ended in a policy error: {r['message']}")
     if r["success"] != episode["success"] or abs(r["progress"] - episode["sum_reward"]) > 1e-5:
         sys.exit(f"lerobot_check: lerobot-eval and {name} ran different episodes")
+same = ("success", "progress", "steps", "reason", "seed")
+if any(records["rmbench_eval"][k] != records["remote_eval"][k] for k in same):
+    sys.exit("lerobot_check: the served checkpoint ran another episode than the local one")
 EOF
 step "done"

@@ -45,8 +45,9 @@ class Lookup(BasePolicy):
     expert's recorded one for it), so it retraces the expert's episode with nothing carried
     from step to step. It counts its calls so a test can see where ``reset`` came."""
 
-    def __init__(self, table):
-        self.table, self.acts, self.resets = table, 0, []
+    def __init__(self, table, resets: list | None = None):
+        # the log may be shared: a server may serve a copy of the policy it built
+        self.table, self.acts, self.resets = table, 0, ([] if resets is None else resets)
 
     def reset(self, instruction, task_info):
         self.resets.append(self.acts)
@@ -186,7 +187,7 @@ def test_the_rest_of_a_chunk_is_dropped_at_a_reset():
 SERVED: dict = {}
 register_policy("test_lookup", "the expert's recorded actions by observation (memoryless)",
                 cameras=(), obs_type=lambda arg: "environment_state_agent_pos")(
-    lambda arg, env: SERVED.setdefault("policy", Lookup(SERVED["table"])))
+    lambda arg, env: Lookup(SERVED["table"], SERVED.setdefault("resets", [])))
 
 
 @pytest.fixture(scope="module")
@@ -201,7 +202,7 @@ def lookup(tmp_path_factory):
 
 def test_an_evaluation_runs_the_probe_beside_the_plain_arm(lookup, tmp_path):
     seed, cache = lookup
-    SERVED.pop("policy", None)
+    SERVED.pop("resets", None)
     common = {"episodes": 1, "video": "none", "progress": False, "seed_cache": cache}
     first = evaluate(EvalConfig((TASK,), "test_lookup", tmp_path / "out", **common))
     assert first["tasks"][TASK]["memory_reset"] == {}
@@ -216,8 +217,9 @@ def test_an_evaluation_runs_the_probe_beside_the_plain_arm(lookup, tmp_path):
     plain = read_records(tmp_path / "out" / TASK / "episodes.jsonl")
     probed = read_records(tmp_path / "out" / TASK / "memory_reset-aliasing.jsonl")
     assert len(plain) == 1 and [strip(r) for r in probed] == [strip(r) for r in plain]
-    assert SERVED["policy"].resets == [0, plain[0]["steps"],
-                                       plain[0]["steps"] + probed[0]["memory_resets"][0]]
+    # each evaluation builds its policy: reset at its episode's start, and the probed one again
+    # after as many actions as the aliasing step counts
+    assert SERVED["resets"] == [0, 0, probed[0]["memory_resets"][0]]
     assert "drop (points)" in (tmp_path / "out" / "summary.md").read_text()
     # a later evaluation without the probe keeps its result in the summary
     again = evaluate(EvalConfig((TASK,), "test_lookup", tmp_path / "out", **common))
@@ -244,7 +246,7 @@ def test_an_evaluation_runs_the_probe_beside_the_plain_arm(lookup, tmp_path):
 
 def test_the_probe_resets_a_served_policy_over_the_wire(lookup):
     seed, _ = lookup
-    SERVED.pop("policy", None)
+    SERVED.pop("resets", None)
     server = PolicyServer("test_lookup", TASK, port=0).start()
     env = rmbench.make(TASK, **STATE)
     try:
@@ -260,8 +262,7 @@ def test_the_probe_resets_a_served_policy_over_the_wire(lookup):
         server.stop()
     assert plain["success"] and strip(probed) == strip(plain)
     # the served policy was reset at each episode's start and at the probed one's aliasing step
-    assert SERVED["policy"].resets == [0, plain["steps"],
-                                       plain["steps"] + probed["memory_resets"][0]]
+    assert SERVED["resets"] == [0, plain["steps"], plain["steps"] + probed["memory_resets"][0]]
 
 
 def test_compare_counts_the_episodes_the_probe_changed():
