@@ -68,11 +68,14 @@ def plan_noise(plan: Plan) -> dict | None:
 
 
 def table(rows: dict[str, dict]) -> str:
-    head = (f"{'policy':<18} {'success':>8} {'progress':>9} {'train s':>8} {'eval s':>8}  "
+    head = (f"{'policy':<18} {'success':>8} {'95% interval':>14} {'progress':>9} {'train s':>8} "
+            f"{'eval s':>8}  "
             + " ".join(f"{e[:8]:>8}" for e in ENDINGS) + "  memory")
     lines = [head, "-" * len(head)]
     for spec, r in rows.items():
-        lines.append(f"{spec:<18} {100 * r['success_rate']:>7.1f}% {r['mean_progress']:>9.3f} "
+        low, high = r["success_ci95"] or (float("nan"), float("nan"))
+        lines.append(f"{spec:<18} {100 * r['success_rate']:>7.1f}% "
+                     f"{f'[{100 * low:.0f}, {100 * high:.0f}]':>14} {r['mean_progress']:>9.3f} "
                      f"{r['train_wall_s'] or 0:>8.0f} {r['eval_wall_s'] or 0:>8.0f}  "
                      + " ".join(f"{r['endings'].get(e, 0):>8}" for e in ENDINGS)
                      + f"  {r['memory']}")

@@ -57,7 +57,9 @@ def test_expert_solves_verified_seeds_and_records_everything(tmp_path):
     assert {"task", "seed", "success", "progress", "steps", "wall_s", "reason", "message"} <= set(recs[0])
     assert recs[0]["video"] == "videos/seed-100000.mp4" and recs[1]["video"] is None
     assert (tmp_path / "out" / TASK / recs[0]["video"]).stat().st_size > 1000
-    assert "| observe_and_pickup | M(1) | 3 | 100.0% |" in (tmp_path / "out" / "summary.md").read_text()
+    assert r["success_ci95"] == [0.4385, 1.0]  # Wilson's 95% interval for 3 of 3
+    assert "| observe_and_pickup | M(1) | 3 | 100.0% [43.9, 100.0] |" in \
+        (tmp_path / "out" / "summary.md").read_text()
     # the events: each subtask's start, in order, and the task's facts where they changed
     subtasks = [(step, v) for step, source, key, v in recs[0]["events"] if key == "subtask"]
     assert subtasks[0] == (0, "watch the reference object") and subtasks[-1][1] == "done"
@@ -166,8 +168,10 @@ def test_report_renders_markdown_and_html(tmp_path):
 
     evaluate(cfg(tmp_path, video="first:1", episodes=2))
     md = write_report([tmp_path / "out"], tmp_path / "r.md", ["Mem-0"]).read_text()
-    assert "| observe_and_pickup | M(1) | 100.0 | 4.0 |" in md
-    assert "| **average M(1)** | M(1) | — | 52.8 |" in md  # other M(1) tasks not evaluated
+    # each rate beside its 95% interval: 2 of 2 here, 4 of the published 100 rollouts
+    assert "| observe_and_pickup | M(1) | 100.0 [34, 100] | 4.0 [2, 10] |" in md
+    assert "| **average M(1)** | M(1) | — | 52.8 [48, 57] |" in md  # others not evaluated
+    assert "| observe_and_pickup | M(1) | 100.0 |\n" in md  # progress: no interval
     page = write_report([tmp_path / "out"], tmp_path / "r.html", []).read_text()
     assert "<svg" in page and "seed-100000.mp4" in page
     with pytest.raises(ValueError, match="no published numbers"):

@@ -31,7 +31,8 @@ LAYERS: list[set[str]] = [
     {"policies"},  # the policy interface, its spec registry, the built-in and learned policies
     {"eval"},  # the harness that runs a policy spec on expert-verified seeds
     {"suite"},  # the benchmark's tables: collect, train and evaluate every cell
-    {"serve"},  # the websocket policy server, and the remote: client policy
+    # the websocket policy server and the remote: client policy; rmbench inside LeRobot
+    {"serve", "lerobot"},
     {"cli"},  # the command line
 ]
 LAYER = {name: depth for depth, names in enumerate(LAYERS) for name in names}

@@ -208,6 +208,8 @@ def test_learning_benchmark_is_the_table_for_one_task(toy_table, tmp_path):
     table = json.loads((out / "table.json").read_text())["cells"]["observe_and_pickup"]
     for spec_ in ("mem0", "dp"):
         assert res["policies"][spec_]["success_rate"] == table[spec_]["success_rate"]
+        k = res["policies"][spec_]["successes"]  # of 1 episode: Wilson's interval
+        assert res["policies"][spec_]["success_ci95"] == ([0.2065, 1.0] if k else [0.0, 0.7935])
     assert res["dataset"]["episodes"] == 2 and res["noise"] is None
     with pytest.raises(SystemExit, match="unknown policy"):
         learning.main(["--task", "observe_and_pickup", "--obs", "state", "--policies", "pi0"])
@@ -407,3 +409,29 @@ def test_a_machine_with_a_gpu_is_named_with_it():
     machine = {**describe(), "gpu": "NVIDIA H100 80GB HBM3"}
     assert short(machine) == f"{short(describe())}, NVIDIA H100 80GB HBM3"
 
+
+
+def test_tables_give_each_rate_its_interval_and_mem0_its_differences():
+    from dataclasses import asdict
+
+    from rmbench.eval.chance import chance
+
+    plan = Plan("state", ("put_back_block",), ("mem0", "mem0:no_anchor", "mem0:no_sliding",
+                                               "mem0:no_memory"))
+    cell = lambda k: {"success_rate": k / 100, "mean_progress": 0.5, "episodes": 100}  # noqa: E731
+    cells = {"put_back_block": {"mem0": cell(85), "mem0:no_anchor": cell(80),
+                                "mem0:no_sliding": cell(7), "mem0:no_memory": None}}
+    diffs = tables.differences(cells)["put_back_block"]
+    assert set(diffs) == {"mem0:no_anchor", "mem0:no_sliding"}  # no cell, no difference
+    assert diffs["mem0:no_sliding"]["difference"] == 0.78 and diffs["mem0:no_sliding"]["outside_noise"]
+    # 85 against 80 of 100 each: inside the noise
+    assert not diffs["mem0:no_anchor"]["outside_noise"] and diffs["mem0:no_anchor"]["ci95"][0] < 0
+    res = {"plan": plan.to_dict(), "cells": cells, "differences": tables.differences(cells),
+           "chance": {"put_back_block": asdict(chance("put_back_block"))}, "failed": {},
+           "wall_s": {"table": None, "collect": {}}, "machine": describe()}
+    text = tables.markdown(res)
+    assert "| put_back_block | M(1) | 85.0 [77, 91] | 80.0 [71, 87] | 7.0 [3, 14] | — |" in text
+    assert "| put_back_block | M(1) | +5 [-6, +16] | +78 [+67, +85]* | — |" in text
+    # the option off: the tables as they were
+    plain = tables._markdown_table(res, ["mem0"])
+    assert "| put_back_block | M(1) | 85.0 | 25.0 |" in plain

@@ -19,14 +19,22 @@ def cmd_eval(args) -> int:
     cfg = EvalConfig(tuple(tasks), args.policy, args.out, episodes=args.episodes, seed=args.seed,
                      workers=args.workers, backend=args.backend, video=args.video,
                      instructions=args.instructions, progress=not args.json,
-                     seeds_of=args.seeds_of)
+                     seeds_of=args.seeds_of, memory_reset=args.memory_reset)
     summary = evaluate(cfg)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
+        from rmbench.eval.harness import drop_text, rate_text
+
         for task, r in summary["tasks"].items():
             print(f"{task:<20} {r['tmc']:<5} success {r['successes']:>3}/{r['episodes']:<3} "
-                  f"({100 * r['success_rate']:5.1f}%)  progress {r['mean_progress']:.3f}")
+                  f"({rate_text(r)})  progress {r['mean_progress']:.3f}")
+            for name, c in r.get("memory_reset", {}).items():
+                if c.get("episodes"):
+                    print(f"{'':<20} memory reset {name}: {rate_text(c['with'], c['episodes'])}"
+                          f" against {rate_text(c['without'], c['episodes'])}, drop "
+                          f"{drop_text(c)} points"
+                          + ("" if c["outside_noise"] else " (within the noise)"))
         print(f"records and summary in {args.out}")
     return 0
 
@@ -131,6 +139,11 @@ def add_parsers(sub) -> None:
                    help="run the seeds DATASET's demonstrations were recorded on instead (the "
                         "layouts a policy trained on: its score there against --seed's held-out "
                         "layouts is what it memorised)")
+    p.add_argument("--memory-reset", metavar="aliasing|every:K",
+                   help="memory probe: also run the same seeds with the policy reset at the "
+                        "task's aliasing moment (or every K steps); the summary gives both "
+                        "rates and the drop with its 95%% interval. Adds to a folder already "
+                        "evaluated without it")
     p.add_argument("--out", required=True, help="results folder (resumed if it exists)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--backend", choices=["local", "ray"], default="local")

@@ -3,7 +3,9 @@
 Whatever the policy does wrong (raises, returns NaN or a wrong shape) ends the episode as
 ``policy_error`` with the message; it never stops the evaluation. The record keeps the
 episode's events (``eval/events.py``): when the task's subtask and discrete facts changed,
-and the policy's own status where it reports one (``status()``: a Mem-0's subtask).
+and the policy's own status where it reports one (``status()``: a Mem-0's subtask). With a
+memory probe (``eval/probe.py``) the policy is reset mid-episode and the record lists the
+steps at which it was (``memory_resets``).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from rmbench.eval.events import Events
+from rmbench.eval.probe import MemoryReset
 from rmbench.sim.simulator import ACTION_DIM
 from rmbench.video import PREVIEW_CODEC, Mp4Encoder
 
@@ -35,10 +38,12 @@ def as_chunk(out) -> np.ndarray:
 
 
 def run_policy_episode(env, policy, seed: int, video: bool = False,
-                       on_step: Callable[[int, dict], None] | None = None) -> dict[str, Any]:
+                       on_step: Callable[[int, dict], None] | None = None,
+                       memory_reset: MemoryReset | None = None) -> dict[str, Any]:
     """Returns the episode's record; ``record["video"]`` holds MP4 bytes when ``video``.
     ``on_step(step, info)`` after every env step lets an analysis watch the scene of the very
-    episode the evaluation runs (``scripts/swap_placements.py``)."""
+    episode the evaluation runs (``scripts/swap_placements.py``). ``memory_reset`` resets the
+    policy where the probe says, dropping what is left of its last chunk."""
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
     u = env.unwrapped
@@ -52,6 +57,8 @@ def run_policy_episode(env, policy, seed: int, video: bool = False,
     events.update(0, "task", {"subtask": info["subtask"], "subtask_step": info["subtask_step"],
                               **info["predicates"]})
     status = getattr(policy, "status", dict)
+    trigger = memory_reset.trigger(type(u.task).aliasing_stage) if memory_reset else None
+    resets: list[int] = []
     try:
         policy.reset(info["instruction"], task_info)
     except Exception as err:
@@ -84,8 +91,19 @@ def run_policy_episode(env, policy, seed: int, video: bool = False,
             elif terminated:
                 reason, message = "task_failure", info.get("failure_reason") or ""
             break
-    return {"task": type(u.task).name, "seed": seed, "success": success,
-            "progress": round(best, 6), "steps": steps, "step_limit": u.step_limit,
-            "reason": reason, "message": message, "instruction": task_info["instruction"],
-            "wall_s": round(time.perf_counter() - t0, 3), "events": events.to_list(),
-            "video": encoder.finish() if encoder else None}
+        if trigger is not None and trigger.due(steps, info):
+            resets.append(steps)
+            queue = []  # a chunk asked for before the reset is memory too
+            try:
+                policy.reset(task_info["instruction"], task_info)
+            except Exception as err:
+                reason, message = "policy_error", f"reset: {type(err).__name__}: {err}"
+                break
+    record = {"task": type(u.task).name, "seed": seed, "success": success,
+              "progress": round(best, 6), "steps": steps, "step_limit": u.step_limit,
+              "reason": reason, "message": message, "instruction": task_info["instruction"],
+              "wall_s": round(time.perf_counter() - t0, 3), "events": events.to_list(),
+              "video": encoder.finish() if encoder else None}
+    if memory_reset is not None:  # (absent otherwise: records without the probe stay as they were)
+        record["memory_resets"] = resets
+    return record

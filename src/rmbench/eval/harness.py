@@ -4,8 +4,10 @@ Layout of ``out``::
 
     run.json                   what was asked (policy, seed, episodes, instructions)
     <task>/episodes.jsonl      one record per episode, appended and flushed as it ends
+    <task>/memory_reset-<name>.jsonl  the same seeds with a memory probe (--memory-reset)
     <task>/videos/seed-N.mp4   third-person videos (per --video)
-    summary.json, summary.md   per-task success rate and progress
+    summary.json, summary.md   per-task success rate with its 95% interval, progress, and
+                               each probe's rates with and without it and their difference
 
 Records are appended in seed order whatever the worker count, so results are identical for
 any number of workers or backend. A killed run re-run with the same arguments keeps every
@@ -26,6 +28,8 @@ from typing import Any
 from tqdm import tqdm
 
 from rmbench.eval.episode import ENDINGS
+from rmbench.eval.intervals import wilson
+from rmbench.eval.probe import MemoryReset, arm_file, arm_name, compare
 from rmbench.eval.seeds import verified_seeds
 from rmbench.eval.worker import close_worker, episode_job
 from rmbench.identity import differences
@@ -57,6 +61,10 @@ class EvalConfig:
     seeds_of: str | Path | None = None
     """A dataset: run its demonstrations' seeds (the layouts a policy trained on, beside the
     held-out ones ``seed`` picks: the gap is what the policy memorised) instead of ``seed``'s."""
+    memory_reset: str | None = None
+    """A memory probe (``eval/probe.py``: ``aliasing`` or ``every:K``): the same seeds run a
+    second time with the policy reset there, into the folder's arm of that probe. Not part of
+    the folder's identity: a probe is added to an evaluation already made."""
 
     def __post_init__(self):
         if not self.tasks:
@@ -70,6 +78,8 @@ class EvalConfig:
         if self.instructions not in ("seen", "unseen"):
             raise ValueError(f"instructions must be 'seen' or 'unseen', got {self.instructions!r}")
         self.video_rule(0, True)
+        if self.memory_reset is not None:
+            MemoryReset.parse(self.memory_reset)
 
     def video_rule(self, index: int, success: bool | None) -> bool:
         """Keep a video of the ``index``-th episode? (``success`` None: before it runs.)"""
@@ -120,6 +130,8 @@ class TaskResult:
     success_rate: float
     mean_progress: float
     endings: dict[str, int] = field(default_factory=dict)
+    success_ci95: list[float] | None = None  # Wilson 95% interval of success_rate
+    memory_reset: dict[str, dict] = field(default_factory=dict)  # probe name -> eval.probe.compare
 
 
 def summarize(task: str, records: list[dict]) -> TaskResult:
@@ -127,7 +139,8 @@ def summarize(task: str, records: list[dict]) -> TaskResult:
     ok = sum(r["success"] for r in records)
     endings = {e: sum(r["reason"] == e for r in records) for e in ENDINGS}
     return TaskResult(task, get_task(task).tmc, n, ok, round(ok / n, 4) if n else 0.0,
-                      round(sum(r["progress"] for r in records) / n, 4) if n else 0.0, endings)
+                      round(sum(r["progress"] for r in records) / n, 4) if n else 0.0, endings,
+                      [round(v, 4) for v in wilson(ok, n)] if n else None)
 
 
 def _check_identity(out: Path, cfg: EvalConfig) -> None:
@@ -167,9 +180,16 @@ def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
         else:
             seeds = verified_seeds(task, cfg.seed, cfg.episodes, cfg.seed_cache, executor,
                                    progress=cfg.progress)
-        return _run_episodes(cfg, task, folder, seeds, executor)
+        result = _run_episodes(cfg, task, folder, seeds, executor)
+        if cfg.memory_reset is not None:
+            _run_episodes(cfg, task, folder, seeds, executor, MemoryReset.parse(cfg.memory_reset))
     finally:
         executor.shutdown()
+    plain = read_records(folder / "episodes.jsonl")
+    for path in sorted(folder.glob(arm_file("*"))):
+        probed = [r for r in read_records(path) if r["seed"] in set(seeds)]
+        result.memory_reset[arm_name(path.name)] = compare(plain, probed)
+    return result
 
 
 def dataset_seeds(path: str | Path, task: str) -> list[int]:
@@ -184,15 +204,20 @@ def dataset_seeds(path: str | Path, task: str) -> list[int]:
 
 
 def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
-                  executor) -> TaskResult:
-    path = folder / "episodes.jsonl"
+                  executor, probe: MemoryReset | None = None) -> TaskResult:
+    """The seeds' episodes not yet recorded, into the ordinary arm or ``probe``'s (whose
+    episodes keep no video: the ordinary arm's show the same layouts)."""
+    path = folder / (arm_file(probe.name) if probe else "episodes.jsonl")
     records = [r for r in read_records(path) if r["seed"] in seeds]
     done = {r["seed"] for r in records}
     todo = [(i, s) for i, s in enumerate(seeds) if s not in done]
     n_todo = len(todo)
-    calls = ((i, episode_job, (task, cfg.policy, cfg.instructions, s, cfg.video_rule(i, None)))
+    calls = ((i, episode_job, (task, cfg.policy, cfg.instructions, s,
+                               cfg.video_rule(i, None) and probe is None,
+                               probe.spec if probe else None))
              for i, s in todo)
-    bar = tqdm(total=len(seeds), initial=len(done), unit="ep", desc=f"{task} {cfg.policy}",
+    desc = f"{task} {cfg.policy}" + (f" memory reset {probe.spec}" if probe else "")
+    bar = tqdm(total=len(seeds), initial=len(done), unit="ep", desc=desc,
                disable=not cfg.progress, dynamic_ncols=True)
     t0 = time.perf_counter()
     try:
@@ -221,10 +246,38 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
 def summary_markdown(summary: dict) -> str:
     lines = [f"# {summary['policy']}: evaluation seed {summary['seed']}, "
              f"{summary['instructions']} instructions", "",
-             "| task | TMC | episodes | success rate | mean progress | " + " | ".join(ENDINGS) + " |",
+             "| task | TMC | episodes | success rate [95% interval] | mean progress | "
+             + " | ".join(ENDINGS) + " |",
              "|---|---|---|---|---|" + "---|" * len(ENDINGS)]
     for t, r in summary["tasks"].items():
-        lines.append(f"| {t} | {r['tmc']} | {r['episodes']} | {100 * r['success_rate']:.1f}% | "
+        lines.append(f"| {t} | {r['tmc']} | {r['episodes']} | {rate_text(r)} | "
                      f"{r['mean_progress']:.3f} | "
                      + " | ".join(str(r["endings"][e]) for e in ENDINGS) + " |")
+    probes = [(t, name, c) for t, r in summary["tasks"].items()
+              for name, c in r.get("memory_reset", {}).items() if c.get("episodes")]
+    if probes:
+        lines += ["", "## Memory probe (the policy reset mid-episode, the same seeds)", "",
+                  "| task | memory reset | episodes | reset in | without | with | drop (points) "
+                  "[95% interval] | outside the noise | lost / gained |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for t, name, c in probes:
+            lines.append(f"| {t} | {name} | {c['episodes']} | {c['reset_episodes']} | "
+                         f"{rate_text(c['without'], c['episodes'])} | "
+                         f"{rate_text(c['with'], c['episodes'])} | {drop_text(c)} | "
+                         f"{'yes' if c['outside_noise'] else 'no'} | "
+                         f"{c['changed']['lost']} / {c['changed']['gained']} |")
     return "\n".join(lines) + "\n"
+
+
+def rate_text(r: dict, episodes: int | None = None) -> str:
+    """'85.0% [76.7, 90.7]': a summary's success rate and its Wilson 95% interval (computed
+    from the count where an older summary lacks it)."""
+    n = r.get("episodes", episodes)
+    ci = r.get("success_ci95") or (wilson(round(r["success_rate"] * n), n) if n else None)
+    rate = f"{100 * r['success_rate']:.1f}%"
+    return rate if ci is None else f"{rate} [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]"
+
+
+def drop_text(c: dict) -> str:
+    return (f"{100 * c['drop']:+.1f} [{100 * c['drop_ci95'][0]:+.1f}, "
+            f"{100 * c['drop_ci95'][1]:+.1f}]")

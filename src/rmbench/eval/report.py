@@ -2,7 +2,11 @@
 
 Rows are tasks grouped M(1) then M(n), with group and overall averages; columns are the
 evaluated policies (each folder's summary.json), and optionally the published success rates.
-Markdown, or HTML with bar charts and links to the videos.
+Markdown, or HTML with bar charts and links to the videos. Every success rate carries its
+Wilson 95% interval (``eval/intervals.py``): a published one too, over its 100 rollouts; an
+average over tasks of equal episode counts, the interval of the pooled episodes (wider than
+the average's own where the tasks' rates differ). A folder with a memory probe
+(``rmbench eval --memory-reset``) adds its rates with and without and the drop.
 """
 
 from __future__ import annotations
@@ -12,11 +16,13 @@ import json
 from pathlib import Path
 
 from rmbench.eval.chance import chance
-from rmbench.eval.harness import read_records
+from rmbench.eval.harness import drop_text, rate_text, read_records
+from rmbench.eval.intervals import wilson
 from rmbench.tasks.registry import ordered
 from rmbench.video import write_atomic
 
 # Success rates (%) published for the benchmark (100 rollouts, 50 demonstrations per task).
+PUBLISHED_ROLLOUTS = 100
 PUBLISHED = {
     "DP": {"observe_and_pickup": 1, "rearrange_blocks": 0, "put_back_block": 0, "swap_blocks": 11,
            "swap_T": 20, "battery_try": 10, "blocks_ranking_try": 10, "cover_blocks": 0,
@@ -34,6 +40,33 @@ PUBLISHED = {
               "swap_blocks": 67, "swap_T": 14, "battery_try": 28, "blocks_ranking_try": 18,
               "cover_blocks": 68, "press_button": 0},
 }
+
+
+class Rate(float):
+    """A success rate in percent that knows its count: a float everywhere (averages, bars),
+    and its Wilson 95% interval where a table prints it."""
+
+    successes: int
+    episodes: int
+
+    def __new__(cls, successes: int, episodes: int) -> Rate:
+        rate = super().__new__(cls, 100 * successes / episodes)
+        rate.successes, rate.episodes = int(successes), int(episodes)
+        return rate
+
+    @classmethod
+    def of(cls, row: dict) -> Rate | float:
+        """From a summary's (or a table cell's) row; an older row without ``successes`` has
+        it back from its rate and episodes."""
+        n = row.get("episodes")
+        if not n:
+            return 100 * row["success_rate"]
+        return cls(row.get("successes", round(row["success_rate"] * n)), n)
+
+    @property
+    def ci95(self) -> tuple[float, float]:
+        low, high = wilson(self.successes, self.episodes)
+        return 100 * low, 100 * high
 
 
 def load_runs(folders: list[str | Path], labels: list[str] | None = None) -> list[dict]:
@@ -60,12 +93,14 @@ def load_runs(folders: list[str | Path], labels: list[str] | None = None) -> lis
 
 
 def table(runs: list[dict], published: list[str], metric: str = "success_rate",
-          tasks: list[str] | None = None, with_chance: bool = False
+          tasks: list[str] | None = None, with_chance: bool = False, intervals: bool = False
           ) -> tuple[list[str], list[list]]:
     """Header and rows: task, TMC, one value (%) of ``metric`` (success_rate or mean_progress)
     per column; None where not evaluated. Published numbers exist for success rates only, and
     so does the last column ``with_chance`` adds: the task's chance level for a policy
-    without memory (``eval/chance.py``). ``tasks`` keeps only those rows (default: all nine)."""
+    without memory (``eval/chance.py``). ``tasks`` keeps only those rows (default: all nine).
+    ``intervals``: success rates are ``Rate``s (floats with their count and interval)."""
+    intervals = intervals and metric == "success_rate"
     published = published if metric == "success_rate" else []
     with_chance = with_chance and metric == "success_rate"
     header = (["task", "TMC"] + [r["name"] for r in runs] + [f"{p} (published)" for p in published]
@@ -77,8 +112,13 @@ def table(runs: list[dict], published: list[str], metric: str = "success_rate",
             continue
         group_rows = []
         for t in names:
-            vals = [100 * r["summary"]["tasks"][t][metric] if t in r["summary"]["tasks"]
-                    else None for r in runs] + [PUBLISHED[p][t] for p in published]
+            if intervals:
+                vals = [Rate.of(r["summary"]["tasks"][t]) if t in r["summary"]["tasks"]
+                        else None for r in runs]
+                vals += [Rate(PUBLISHED[p][t], PUBLISHED_ROLLOUTS) for p in published]
+            else:
+                vals = [100 * r["summary"]["tasks"][t][metric] if t in r["summary"]["tasks"]
+                        else None for r in runs] + [PUBLISHED[p][t] for p in published]
             vals += [100 * chance(t).rate] * with_chance
             group_rows.append([t, group, *vals])
         rows.extend(group_rows)
@@ -92,33 +132,65 @@ def _averages(rows: list[list]) -> list:
     out = []
     for k in range(2, len(rows[0])):
         vals = [r[k] for r in rows]
-        out.append(None if any(v is None for v in vals) else sum(vals) / len(vals))
+        if any(v is None for v in vals):
+            out.append(None)
+        elif all(isinstance(v, Rate) for v in vals) and len({v.episodes for v in vals}) == 1:
+            # equal counts: the average is the pooled episodes' rate, with their interval
+            out.append(Rate(sum(v.successes for v in vals), sum(v.episodes for v in vals)))
+        else:
+            out.append(sum(vals) / len(vals))
     return out
 
 
-def _fmt(v) -> str:
-    return "—" if v is None else f"{v:.1f}"
+def format_cell(v) -> str:
+    """'85.0', or '85.0 [77, 91]' for a ``Rate``: the value and its 95% interval."""
+    if v is None:
+        return "—"
+    if isinstance(v, Rate):
+        low, high = v.ci95
+        return f"{v:.1f} [{low:.0f}, {high:.0f}]"
+    return f"{v:.1f}"
 
 
 def markdown(runs: list[dict], published: list[str]) -> str:
     lines = []
-    for metric, title in (("success_rate", "Success rate (%)"),
+    for metric, title in (("success_rate", "Success rate (%) [95% interval]"),
                           ("mean_progress", "Progress (mean of each episode's best, %)")):
-        header, rows = table(runs, published, metric, with_chance=True)
+        header, rows = table(runs, published, metric, with_chance=True, intervals=True)
         lines += [f"# {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         for r in rows:
             bold = str(r[0]).startswith("average")
-            cells = [f"**{r[0]}**" if bold else r[0], r[1]] + [_fmt(v) for v in r[2:]]
+            cells = [f"**{r[0]}**" if bold else r[0], r[1]] + [format_cell(v) for v in r[2:]]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
+    lines += probe_markdown(runs)
     lines += ["Runs: " + ", ".join(
         f"{r['name']}: `{r['policy']}` ({r['folder']})" if r["name"] != r["policy"]
         else f"`{r['name']}` ({r['folder']})" for r in runs), ""]
     return "\n".join(lines)
 
 
+def probe_markdown(runs: list[dict]) -> list[str]:
+    """The memory probes the folders hold: per task, the rate with and without the reset, the
+    drop (points) and its 95% interval."""
+    rows = [(run["name"], t, name, c) for run in runs
+            for t, r in run["summary"]["tasks"].items()
+            for name, c in r.get("memory_reset", {}).items() if c.get("episodes")]
+    if not rows:
+        return []
+    lines = ["# Memory probe (the policy reset mid-episode, the same seeds)", "",
+             "| policy | task | memory reset | episodes | reset in | without | with | "
+             "drop (points) [95% interval] | outside the noise |", "|" + "---|" * 9]
+    for name, t, probe, c in rows:
+        lines.append(f"| {name} | {t} | {probe} | {c['episodes']} | {c['reset_episodes']} | "
+                     f"{rate_text(c['without'], c['episodes'])} | "
+                     f"{rate_text(c['with'], c['episodes'])} | {drop_text(c)} | "
+                     f"{'yes' if c['outside_noise'] else 'no'} |")
+    return lines + [""]
+
+
 def html_report(runs: list[dict], published: list[str]) -> str:
-    header, rows = table(runs, published)
+    header, rows = table(runs, published, intervals=True)
     esc = html.escape
     colours = ["#4c78a8", "#f58518", "#54a24b", "#e45756", "#72b7b2", "#b279a2", "#ff9da6",
                "#9d755d", "#bab0ac"]
@@ -131,7 +203,7 @@ def html_report(runs: list[dict], published: list[str]) -> str:
     for r in rows:
         cls = " class='avg'" if str(r[0]).startswith("average") else ""
         out.append(f"<tr{cls}><td>{esc(str(r[0]))}</td><td>{esc(str(r[1]))}</td>"
-                   + "".join(f"<td>{_fmt(v)}</td>" for v in r[2:]) + "</tr>")
+                   + "".join(f"<td>{format_cell(v)}</td>" for v in r[2:]) + "</tr>")
     out.append("</table><h2>Per task</h2>")
     series = header[2:]
     bar_w, gap, height = 14, 10, 120

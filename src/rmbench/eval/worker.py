@@ -10,19 +10,22 @@ from typing import Any
 
 from rmbench.envs.registration import make
 from rmbench.eval.episode import run_policy_episode
+from rmbench.eval.probe import MemoryReset
 from rmbench.policies.registry import env_options, make_policy
 
 _WORKER: dict[str, Any] = {}
 
 
-def episode_job(task: str, policy: str, instructions: str, seed: int, video: bool) -> dict:
+def episode_job(task: str, policy: str, instructions: str, seed: int, video: bool,
+                memory_reset: str | None = None) -> dict:
     key = (task, policy, instructions)
     if _WORKER.get("key") != key:
         close_worker()
         # the observation the policy reads (a state checkpoint: environment_state_agent_pos)
         env = make(task, instructions=instructions, **env_options(policy))
         _WORKER.update(key=key, env=env, policy=make_policy(policy, env))
-    return run_policy_episode(_WORKER["env"], _WORKER["policy"], seed, video)
+    probe = MemoryReset.parse(memory_reset) if memory_reset else None
+    return run_policy_episode(_WORKER["env"], _WORKER["policy"], seed, video, memory_reset=probe)
 
 
 def close_worker() -> None:

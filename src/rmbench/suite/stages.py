@@ -20,6 +20,7 @@ from rmbench.data.reader import Dataset
 from rmbench.envs.noise import NoiseSpec
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.harness import read_records
+from rmbench.eval.intervals import wilson
 from rmbench.machine import describe
 from rmbench.suite.plan import COLLECT_CAMERAS, Plan, config_for, memory_of, parse_policy, trained_spec
 from rmbench.tasks import get_task
@@ -236,17 +237,21 @@ def failure_reasons(records: Path) -> dict[str, int]:
 
 
 def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | None:
-    """A finished cell's row (success rate, progress, endings, failure reasons, wall times and
-    the machines they were measured on, its memory in words, its folders), or None while it
-    is not evaluated."""
+    """A finished cell's row (success rate with its Wilson 95% interval, progress, endings,
+    failure reasons, wall times and the machines they were measured on, its memory in words,
+    its folders), or None while it is not evaluated."""
     result = evaluated(plan, out, task, spec)
     if result is None:
         return None
     ckpt, evals = plan.train_dir(out, task, spec), plan.eval_dir(out, task, spec)
     train_timing, eval_timing = read_json(ckpt / TIMING, {}), read_json(evals / TIMING, {})
     cfg = config_for(trained_spec(spec), plan.obs, plan.sets)
-    return {"success_rate": result["success_rate"], "mean_progress": result["mean_progress"],
-            "episodes": result["episodes"], "endings": result["endings"],
+    n = result["episodes"]
+    k = result.get("successes", round(result["success_rate"] * n))  # (older summaries)
+    return {"success_rate": result["success_rate"], "successes": k,
+            "success_ci95": [round(v, 4) for v in wilson(k, n)] if n else None,
+            "mean_progress": result["mean_progress"],
+            "episodes": n, "endings": result["endings"],
             "failure_reasons": failure_reasons(evals / task / "episodes.jsonl"),
             "train_wall_s": train_timing.get("train_wall_s"),
             "train_wall_from_step": train_timing.get("train_wall_from_step", 0),

@@ -1,7 +1,10 @@
 """A table's results: ``table.json`` (every cell's row, the plan, wall times, the machine) and
 ``table.md``, the benchmark's two tables (policies beside the published ones, Mem-0's
 ablations beside the published averages) with M(1) and M(n) groups and averages. A cell not
-evaluated yet reads "—" and keeps its group's average empty."""
+evaluated yet reads "—" and keeps its group's average empty. Every success rate carries its
+Wilson 95% interval (``success_ci95`` in each cell of table.json, "[low, high]" in table.md)
+and Mem-0 against each other column of its row carries the difference's (``differences``):
+whether two cells differ by more than the episodes' noise."""
 
 from __future__ import annotations
 
@@ -11,11 +14,13 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.eval.chance import chance
-from rmbench.eval.report import PUBLISHED, table
+from rmbench.eval.intervals import difference, outside_noise
+from rmbench.eval.report import PUBLISHED, Rate, format_cell, table
 from rmbench.machine import describe, short
 from rmbench.suite.plan import Plan, applies
 from rmbench.suite.runner import column
 from rmbench.suite.stages import TIMING, cell_row, read_json
+from rmbench.tasks import get_task
 from rmbench.video import write_atomic
 
 POLICY_TABLE = ("mem0", "mem0:no_memory", "dp", "act")
@@ -38,10 +43,30 @@ def results(plan: Plan, out: Path, command: str = "",
     collect = {t: read_json(Path(out) / t / TIMING, {}).get("collect_wall_s") for t in cells}
     levels = {t: asdict(chance(t)) for t in cells}
     return {"command": command, "plan": plan.to_dict(), "cells": cells, "chance": levels,
-            "failed": failed or {},
+            "differences": differences(cells), "failed": failed or {},
             "wall_s": {"table": read_json(Path(out) / TIMING, {}).get("table_wall_s"),
                        "collect": collect},
             "machine": describe()}
+
+
+def differences(cells: dict[str, dict[str, Any]], base: str = "mem0") -> dict[str, dict]:
+    """Per task, ``base``'s success rate minus each other evaluated column's, as fractions,
+    with Newcombe's 95% interval and whether it excludes zero (the cells' episodes are
+    independent draws of the same seeds' layouts: the interval is, if anything, wide)."""
+    out: dict[str, dict] = {}
+    for task, row in cells.items():
+        if not row.get(base):
+            continue
+        a = Rate.of(row[base])
+        for spec, cell in row.items():
+            if spec == base or not cell:
+                continue
+            b = Rate.of(cell)
+            d, low, high = difference(a.successes, a.episodes, b.successes, b.episodes)
+            out.setdefault(task, {})[spec] = {
+                "difference": round(d, 4), "ci95": [round(low, 4), round(high, 4)],
+                "outside_noise": outside_noise(a.successes, a.episodes, b.successes, b.episodes)}
+    return out
 
 
 def _columns(res: dict[str, Any], specs: tuple[str, ...]) -> list[str]:
@@ -49,13 +74,14 @@ def _columns(res: dict[str, Any], specs: tuple[str, ...]) -> list[str]:
 
 
 def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] = (),
-                    metric: str = "success_rate") -> list[str]:
+                    metric: str = "success_rate", intervals: bool = False) -> list[str]:
     """``eval.report.table`` over the plan's tasks, one column per spec: "—" where a cell is
     not evaluated yet, "n/a" where the column has no cell (no_key on an M(1) task, and so in
-    the average over both groups)."""
+    the average over both groups). ``intervals``: each success rate "value [low, high]"."""
     runs = [{"name": column(s), "summary": {"tasks": {t: row[s] for t, row in res["cells"].items()
                                                       if row.get(s)}}} for s in specs]
-    header, rows = table(runs, list(published), metric, list(res["cells"]), with_chance=True)
+    header, rows = table(runs, list(published), metric, list(res["cells"]), with_chance=True,
+                         intervals=intervals)
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     groups = {r[1] for r in rows if r[1]}
     for r in rows:
@@ -65,25 +91,53 @@ def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] 
             # the overall average spans every group listed: a column absent from one has none
             scope = [r[1]] if r[1] else groups
             absent = k < len(specs) and not all(applies(specs[k], g) for g in scope)
-            values.append("n/a" if absent else "—" if v is None else f"{v:.1f}")
+            values.append("n/a" if absent else format_cell(v))
         lines.append("| " + " | ".join([name, r[1], *values]) + " |")
     return lines
 
 
-def markdown(res: dict[str, Any]) -> str:
+def _difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0") -> list[str]:
+    """Per task, ``base`` minus each column in points with the difference's 95% interval;
+    "*" where the interval excludes zero, "—" where either cell is missing."""
+    others = [s for s in specs if s != base]
+    lines = ["| task | TMC | " + " | ".join(f"{column(base)} − {column(s)}" for s in others)
+             + " |", "|---|---|" + "---|" * len(others)]
+    for task in res["cells"]:
+        diffs = res.get("differences", {}).get(task, {})
+        values = []
+        for s in others:
+            if not applies(s, get_task(task).tmc):
+                values.append("n/a")
+            elif s not in diffs:
+                values.append("—")
+            else:
+                d, (low, high) = diffs[s]["difference"], diffs[s]["ci95"]
+                values.append(f"{100 * d:+.0f} [{100 * low:+.0f}, {100 * high:+.0f}]"
+                              + ("*" if diffs[s]["outside_noise"] else ""))
+        lines.append(f"| {task} | {get_task(task).tmc} | " + " | ".join(values) + " |")
+    return lines
+
+
+def markdown(res: dict[str, Any], intervals: bool = True) -> str:
     plan = res["plan"]
+    ci = " [95% interval]" if intervals else ""
     lines = [f"# Benchmark table: {plan['obs']} observation", "",
              f"{plan['demos']} demonstrations per task, {plan['steps']} training steps at batch "
              f"{plan['batch']}, {plan['episodes']} evaluation episodes per cell"
              + (f", `--set {' '.join(plan['sets'])}`" if plan["sets"] else "") + ".", "",
-             "## Policies (success rate, %)", ""]
+             f"## Policies (success rate, %{ci})", ""]
     specs = _columns(res, POLICY_TABLE)
     if specs:
-        lines += _markdown_table(res, specs, list(PUBLISHED)) + [""]
+        lines += _markdown_table(res, specs, list(PUBLISHED), intervals=intervals) + [""]
     specs = _columns(res, ABLATION_TABLE)
     if specs:
-        lines += ["## Mem-0's ablations (success rate, %)", ""]
-        lines += _markdown_table(res, specs) + [""]
+        lines += [f"## Mem-0's ablations (success rate, %{ci})", ""]
+        lines += _markdown_table(res, specs, intervals=intervals) + [""]
+        if intervals and "mem0" in specs and len(specs) > 1:
+            lines += ["Mem-0 minus each ablation (points) [95% interval of the difference, "
+                      "Newcombe's]; * where it excludes zero, the difference outside the "
+                      "episodes' noise:", ""]
+            lines += _difference_table(res, specs) + [""]
         lines += ["Published averages: " + "; ".join(
             f"{group}: " + ", ".join(f"{column(s)} {v}" for s, v in vals.items())
             for group, vals in PUBLISHED_ABLATIONS.items()) + ".", ""]

@@ -1,0 +1,91 @@
+"""``lerobot:PATH``: a LeRobot checkpoint (``lerobot-train``'s ``pretrained_model`` folder)
+evaluated by ``rmbench eval``, in a LeRobot environment with rmbench installed.
+
+Each step runs what ``lerobot-eval`` runs: the observation in LeRobot's names (its own
+``preprocess_observation``: rmbench's layout is gym-aloha's), the instruction as the task
+text, the checkpoint's saved pre-processor, ``select_action`` (ACT's and Diffusion Policy's
+own action queues included) and its post-processor. Camera frames of another size than the
+checkpoint was trained on are resized to it. ``reset`` clears the policy's queues, so the
+memory probe (``--memory-reset``) reaches it too.
+
+Registering the spec imports nothing of LeRobot; building the policy does.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rmbench.policies.base import BasePolicy
+from rmbench.policies.registry import register_policy
+
+STATE_KEY, IMAGE_PREFIX = "observation.environment_state", "observation.images."
+
+
+def checkpoint_inputs(path: str | Path) -> dict[str, Any]:
+    """The checkpoint's input features (``config.json``), or a one-line error."""
+    config = Path(path) / "config.json"
+    if not config.is_file():
+        raise ValueError(f"{path}: no config.json (a LeRobot checkpoint folder: "
+                         f"OUTPUT/checkpoints/last/pretrained_model)")
+    return json.loads(config.read_text()).get("input_features", {})
+
+
+def obs_type(path: str | None) -> str:
+    """The rmbench observation a checkpoint reads: its images, its state vector, or both."""
+    inputs = checkpoint_inputs(path or "")
+    pixels = any(k.startswith(IMAGE_PREFIX) for k in inputs)
+    if STATE_KEY in inputs:
+        return "pixels_environment_state_agent_pos" if pixels else "environment_state_agent_pos"
+    return "pixels_agent_pos"
+
+
+class LeRobotPolicy(BasePolicy):
+    def __init__(self, path: str, device: str = "cpu"):
+        import torch
+        from lerobot.configs.policies import PreTrainedConfig
+        from lerobot.envs.utils import preprocess_observation
+        from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+        self.torch, self.preprocess = torch, preprocess_observation
+        cfg = PreTrainedConfig.from_pretrained(path)
+        cfg.pretrained_path, cfg.device = path, device
+        self.policy = get_policy_class(cfg.type).from_pretrained(path, config=cfg)
+        self.policy.eval()
+        self.pre, self.post = make_pre_post_processors(
+            cfg, pretrained_path=path,
+            preprocessor_overrides={"device_processor": {"device": device}})
+        inputs = checkpoint_inputs(path)
+        # (C, H, W) of each camera the checkpoint reads
+        self.images = {k[len(IMAGE_PREFIX):]: tuple(v["shape"]) for k, v in inputs.items()
+                       if k.startswith(IMAGE_PREFIX)}
+        self.cameras = tuple(self.images)
+        self.instruction = ""
+
+    def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
+        self.instruction = instruction
+        self.policy.reset()
+
+    def act(self, observation: dict[str, Any]) -> np.ndarray:
+        torch = self.torch
+        obs = {k: v for k, v in observation.items() if k != "pixels"}
+        if self.images:
+            obs["pixels"] = {c: observation["pixels"][c] for c in self.images}
+        batch = self.preprocess(obs)
+        for cam, (_, h, w) in self.images.items():
+            key = IMAGE_PREFIX + cam
+            if tuple(batch[key].shape[-2:]) != (h, w):
+                batch[key] = torch.nn.functional.interpolate(
+                    batch[key], size=(h, w), mode="bilinear", antialias=True, align_corners=False)
+        batch["task"] = [self.instruction]
+        with torch.inference_mode():
+            action = self.post(self.policy.select_action(self.pre(batch)))
+        return action.to("cpu").numpy().reshape(-1)
+
+
+register_policy("lerobot", "a LeRobot checkpoint (lerobot-train's pretrained_model folder; "
+                "needs LeRobot installed): lerobot:PATH", needs_argument=True,
+                obs_type=obs_type)(lambda arg, env: LeRobotPolicy(arg))
