@@ -28,7 +28,7 @@ from rmbench.eval.chance import chance
 from rmbench.eval.intervals import format_rate
 from rmbench.eval.report import PUBLISHED
 from rmbench.suite.plan import applies
-from rmbench.suite.tables import PUBLISHED_ABLATIONS
+from rmbench.suite.tables import PUBLISHED_ABLATIONS, difference_table, differences
 from rmbench.tasks.registry import ordered
 from rmbench.video import write_atomic
 
@@ -152,6 +152,17 @@ def state_ablations() -> str:
     published = "; ".join(f"{g}: " + ", ".join(f"{COLUMN[s]} {v:g}" for s, v in vals.items())
                           for g, vals in PUBLISHED_ABLATIONS.items())
     return markdown(header, rows) + f"\nPublished averages (per-task numbers unpublished): {published}.\n"
+
+
+def state_differences() -> str:
+    """Mem-0 minus each ablation per task, in points, with Newcombe's 95% interval of the
+    difference (``suite.tables.differences``), * where it excludes zero."""
+    res = load("table_state.json")
+    specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
+             "mem0:gt_classifier"]
+    cells = {t: row for t, row in res["cells"].items()}
+    lines = difference_table({"cells": cells, "differences": differences(cells)}, specs)
+    return "\n".join(lines) + "\n"
 
 
 def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
@@ -417,7 +428,8 @@ def backbone_speed() -> str:
 TABLES: dict[str, Callable[[], str]] = {
     "tasks": tasks,
     "readme-results": readme_results, "state-policies": state_policies,
-    "state-ablations": state_ablations, "state-records": state_records,
+    "state-ablations": state_ablations, "state-differences": state_differences,
+    "state-records": state_records,
     "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,
     "learning-state": learning_state, "learning-state-more": learning_state_more,
     "learning-pixels": learning_pixels, "robustness": robustness,

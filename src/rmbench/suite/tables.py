@@ -96,7 +96,7 @@ def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] 
     return lines
 
 
-def _difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0") -> list[str]:
+def difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0") -> list[str]:
     """Per task, ``base`` minus each column in points with the difference's 95% interval;
     "*" where the interval excludes zero, "—" where either cell is missing."""
     others = [s for s in specs if s != base]
@@ -137,7 +137,7 @@ def markdown(res: dict[str, Any], intervals: bool = True) -> str:
             lines += ["Mem-0 minus each ablation (points) [95% interval of the difference, "
                       "Newcombe's]; * where it excludes zero, the difference outside the "
                       "episodes' noise:", ""]
-            lines += _difference_table(res, specs) + [""]
+            lines += difference_table(res, specs) + [""]
         lines += ["Published averages: " + "; ".join(
             f"{group}: " + ", ".join(f"{column(s)} {v}" for s, v in vals.items())
             for group, vals in PUBLISHED_ABLATIONS.items()) + ".", ""]
