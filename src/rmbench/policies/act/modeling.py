@@ -23,7 +23,8 @@ from rmbench.data import layout as L
 from rmbench.policies.act.config import ACTConfig
 from rmbench.policies.nn.embeddings import sincos_1d, sincos_2d
 from rmbench.policies.nn.normalize import Normalizer
-from rmbench.policies.visuomotor import ACTION_DIM, VisuomotorTrainer, observation_encoder
+from rmbench.policies.visuomotor import VisuomotorTrainer, observation_encoder
+from rmbench.sim.simulator import ACTION_DIM
 
 
 def _encoder(cfg: ACTConfig) -> nn.TransformerEncoder:

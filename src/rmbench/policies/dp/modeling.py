@@ -19,7 +19,8 @@ from rmbench.policies.nn.diffusion import DDPMSchedule
 from rmbench.policies.nn.ema import EMA
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.unet1d import ConditionalUnet1D
-from rmbench.policies.visuomotor import ACTION_DIM, VisuomotorTrainer, observation_encoder
+from rmbench.policies.visuomotor import VisuomotorTrainer, observation_encoder
+from rmbench.sim.simulator import ACTION_DIM
 
 
 class DiffusionPolicyModel(nn.Module):

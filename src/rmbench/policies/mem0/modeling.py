@@ -31,8 +31,7 @@ from rmbench.policies.observation import (
     position_noise_scale,
     state_noise_scale,
 )
-
-ACTION_DIM = 14  # the joint state (and the joint action space)
+from rmbench.sim.simulator import ACTION_DIM
 
 
 class Executor(nn.Module):
