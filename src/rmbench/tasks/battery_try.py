@@ -96,7 +96,6 @@ class BatteryTry(Task):
         return (self.holder, self.lamp, *self.batteries)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         hx, hy = rng.uniform(-0.03, 0.03), rng.uniform(-0.10, -0.06)
         self.holder.move(self.model, (hx, hy))
         self.lamp.move(self.model, (hx, hy + 0.08))

@@ -115,7 +115,6 @@ class BlocksRankingTry(Task):
         return (*self.cubes, self.button, self.lamp)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         h0 = rng.uniform()
         for k, cube in enumerate(self.cubes):  # colour k: the cube's rank in the target order
             cube.paint(self.model, (*colorsys.hsv_to_rgb((h0 + k / 3) % 1.0, 0.85, 0.9), 1.0))

@@ -98,7 +98,6 @@ class CoverBlocks(Task):
         return (*self.cubes, *self.covers)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         xc, y = rng.uniform(-0.02, 0.02), rng.uniform(-0.17, -0.15)
         order = ORDERS[int(rng.integers(len(ORDERS)))]
         self.colours = tuple(self.choose("colours", order, ORDERS))

@@ -100,7 +100,6 @@ class ObserveAndPickup(Task):
         self._sites = [model.site(f"{s}/grasp").id for s in ("left", "right")]
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         shapes, colours = list(SHAPES), list(SHAPE_COLOURS)
         ref = (shapes[int(rng.integers(len(shapes)))], colours[int(rng.integers(len(colours)))])
         looks = [ref]

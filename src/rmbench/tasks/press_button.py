@@ -80,7 +80,6 @@ class PressButton(Task):
         return (*self.buttons.values(), *self.tiles)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         d1 = int(rng.integers(1, 10))
         d2 = int(rng.integers(1, 11 - d1))
         self.d1 = self.choose("d1", d1, range(1, 10))

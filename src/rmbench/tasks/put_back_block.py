@@ -76,7 +76,6 @@ class PutBackBlock(Task):
         return (*self.mats.values(), self.button, self.cube)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         self.centre = np.array([rng.uniform(-0.02, 0.06), rng.uniform(-0.115, -0.095)])
         d = rng.uniform(0.10, 0.13)
         for n, mat in self.mats.items():

@@ -87,7 +87,6 @@ class RearrangeBlocks(Task):
         return (*self.mats.values(), self.button, *self.cubes)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         x0, y = rng.uniform(-0.06, -0.02), rng.uniform(-0.15, -0.08)
         self.slots = np.array([[x0 + k * SLOT_SPACING, y] for k in range(3)])
         self.mats["left"].move(self.model, self.slots[0])

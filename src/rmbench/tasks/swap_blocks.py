@@ -91,7 +91,6 @@ class SwapBlocks(Task):
         return (*self.trays, self.button, *self.cubes)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         xc, y = rng.uniform(-0.02, 0.02), rng.uniform(-0.09, -0.05)
         for k, tray in enumerate(self.trays):
             tray.move(self.model, (xc + (k - 1) * TRAY_SPACING, y))

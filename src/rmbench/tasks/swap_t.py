@@ -69,7 +69,6 @@ class SwapT(Task):
         return self.blocks
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         colours = COLOURS if rng.uniform() < 0.5 else COLOURS[::-1]
         yaws = tuple(float(y) for y in rng.uniform(-0.75, 0.75, 2))
         yaws = self.choose("yaws", yaws)
