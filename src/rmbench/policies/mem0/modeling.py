@@ -35,6 +35,10 @@ from rmbench.sim.simulator import ACTION_DIM
 
 
 class Executor(nn.Module):
+    """Mem-0's executor: each 20 Hz step's observation, the subtask's text and the memories in,
+    c_t out; from c_t the logit that the subtask has ended, and with the joint state a
+    normalised chunk of ``horizon`` actions (flow matching) whenever the policy needs one."""
+
     def __init__(self, cfg: Mem0Config, texts: list[str], text_vectors: torch.Tensor | None,
                  state_dim: int = 0):
         super().__init__()
