@@ -106,7 +106,8 @@ class Motion:
     def __init__(self, ik: ArmIK, substeps: int = 25, servo_gain: float = 1.0,
                  period: float = 1.0 / StationConfig.control_hz):
         self.ik = ik
-        self.period = period  # s, one control step: moves take as many steps as their speed needs
+        # s per control step (the station's): a move takes length / (speed * period) steps, and half again
+        self.period = period
         self.cmd = home_action()
         self.away: set[str] = set()  # arms out of their home pose
         self.offset = np.zeros(len(ARM_ENTRIES))  # estimated executed-minus-commanded joints
