@@ -87,6 +87,24 @@ def test_put_back_block_untouched_is_neither():
     assert not ev.success and not ev.failure and ev.progress == 0.0
 
 
+def test_every_episode_starts_from_the_first_stage_with_only_its_own_overrides():
+    """The base class starts each episode (progress only moves forward within one), and a
+    hidden value fixed for one episode is not fixed for the next."""
+    env, task = put_back_env()
+    drawn = task.original
+    fixed = next(n for n in task.mats if n != drawn)
+    task.cube.place(task.data, task.centre)
+    settle(env)
+    press(env, task.button)
+    assert task.evaluate().stage == 2
+    _, info = env.reset(seed=5, options={"hidden": {"original_mat": fixed}})
+    ev = task.evaluate()
+    assert (ev.stage, ev.progress, info["progress"]) == (0, 0.0, 0.0)
+    assert info["hidden"]["original_mat"] == fixed
+    env.reset(seed=5)
+    assert task.original == drawn and task.evaluate().stage == 0
+
+
 def press_button_env():
     return task_env("press_button", seed=11)
 

@@ -101,8 +101,7 @@ class RMBenchEnv(gym.Env):
         sim, task = self.sim, self.task
         mujoco.mj_resetData(sim.model, sim.data)
         sim.reset_robot()
-        task.set_overrides((options or {}).get("hidden"))
-        task.initialize(self.np_random)
+        task.start_episode(self.np_random, (options or {}).get("hidden"))
         mujoco.mj_forward(sim.model, sim.data)
         for _ in range(SETTLE_STEPS):
             mujoco.mj_step(sim.model, sim.data)

@@ -40,7 +40,8 @@ class ScriptedExpert:
 
     def reset(self, instruction: str = "", task_info: dict[str, Any] | None = None) -> None:
         sim = self.env.sim
-        self.motion = Motion(self.ik, sim.config.substeps, sim.servo_gain)
+        self.motion = Motion(self.ik, sim.config.substeps, sim.servo_gain,
+                             1.0 / sim.config.control_hz)
         self._plan = self.plan(self.env.task)
         self._last = self.motion.cmd.copy()
         self.finished = False

@@ -17,9 +17,8 @@ import numpy as np
 from rmbench.experts.ik import ArmIK, top_down_quat
 from rmbench.sim.kinematics import natural_yaw
 from rmbench.sim.simulator import ARM_ENTRIES, servo_setpoint
-from rmbench.sim.station import ARM_MOUNTS, HOME_ARM, home_action
+from rmbench.sim.station import ARM_MOUNTS, HOME_ARM, StationConfig, home_action
 
-DT = 0.05  # control period (20 Hz)
 FINGER_TIP_BELOW_SITE = 0.017  # fingertips reach this far below the grasp site
 HOVER = 0.10  # approach height of the grasp site above its target
 CARRY_SPEED = 0.30  # m/s
@@ -104,8 +103,11 @@ class Motion:
     per yielded action. ``observe`` (measured joints) and ``compensate`` (the action sent)
     close the loop on the joints; the primitives that touch pieces check the live scene."""
 
-    def __init__(self, ik: ArmIK, substeps: int = 25, servo_gain: float = 1.0):
+    def __init__(self, ik: ArmIK, substeps: int = 25, servo_gain: float = 1.0,
+                 period: float = 1.0 / StationConfig.control_hz):
         self.ik = ik
+        # s per control step (the station's): a move takes length / (speed * period) steps, and half again
+        self.period = period
         self.cmd = home_action()
         self.away: set[str] = set()  # arms out of their home pose
         self.offset = np.zeros(len(ARM_ENTRIES))  # estimated executed-minus-commanded joints
@@ -180,7 +182,7 @@ class Motion:
     def move_joints(self, side: str, target: np.ndarray, speed: float = JOINT_SPEED) -> Actions:
         self.away.add(side)
         start = self.joints(side)
-        n = max(int(np.ceil(np.abs(target - start).max() / (speed * DT) * 1.5)), 2)
+        n = max(int(np.ceil(np.abs(target - start).max() / (speed * self.period) * 1.5)), 2)
         for s in min_jerk(n):
             self.cmd[self._slice(side)] = start + (target - start) * s
             yield self.cmd.copy()
@@ -190,7 +192,7 @@ class Motion:
         self.away.add(side)
         start = self.site_pos(side)
         pos = np.asarray(pos, float)
-        n = max(int(np.ceil(np.linalg.norm(pos - start) / (speed * DT) * 1.5)), 2)
+        n = max(int(np.ceil(np.linalg.norm(pos - start) / (speed * self.period) * 1.5)), 2)
         quat = top_down_quat(yaw)
         q = self.joints(side)
         for s in min_jerk(n):
@@ -262,7 +264,7 @@ class Motion:
             aim = low - grip  # the hand's target for the piece to sit at ``low``
             yield from self.move_to(side, aim + (0, 0, hover), yaw, FINE_SPEED)
             quat, q = top_down_quat(yaw), self.joints(side)
-            n = max(int(np.ceil(hover / (FINE_SPEED * DT) * 1.5)), 2)
+            n = max(int(np.ceil(hover / (FINE_SPEED * self.period) * 1.5)), 2)
             for s in min_jerk(n):
                 grip += IN_HAND_GAIN * (locate()[0] - self.measured_site_pos(side) - grip)
                 aim = low - grip
@@ -282,7 +284,7 @@ class Motion:
                 aim[:2] += error
                 yield from self.move_to(side, aim + (0, 0, hover), yaw, FINE_SPEED)
             quat, q = top_down_quat(yaw), self.joints(side)
-            n = max(int(np.ceil(hover / (FINE_SPEED * DT) * 1.5)), 2)
+            n = max(int(np.ceil(hover / (FINE_SPEED * self.period) * 1.5)), 2)
             for s in min_jerk(n):
                 aim[:2] += DESCENT_GAIN * (target[:2] - locate()[0][:2])
                 q, _ = self.ik.solve(side, aim + (0, 0, hover * (1 - s)), quat, seed=q)

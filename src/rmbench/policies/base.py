@@ -16,11 +16,16 @@ import numpy as np
 
 @runtime_checkable
 class Policy(Protocol):
+    """What evaluation calls: ``reset`` once per episode, then ``act`` at each 20 Hz control
+    step, or after the chunk it returned last has been executed."""
+
     cameras: tuple[str, ...]
 
-    def reset(self, instruction: str, task_info: dict[str, Any]) -> None: ...
+    def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
+        """A new episode: its instruction and the task's facts (name, TMC, subtasks, seed)."""
 
-    def act(self, observation: dict[str, Any]) -> np.ndarray: ...
+    def act(self, observation: dict[str, Any]) -> np.ndarray:
+        """The env's observation in; one 14-d action, or a chunk (k, 14) executed in order."""
 
 
 class BasePolicy:

@@ -56,8 +56,6 @@ from rmbench.tasks import get_task
 from rmbench.training.batches import batch_stream
 from rmbench.training.loop import TrainConfig, train
 
-ACTION_DIM = 14
-
 
 @dataclass(frozen=True)
 class VisuomotorConfig(ReadsObservation, PolicyConfig):

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from rmbench.sim.simulator import ACTION_DIM
+
 # rmbench camera -> openpi ALOHA image key
 CAMERA_KEYS = {"head": "cam_high", "left_wrist": "cam_left_wrist", "right_wrist": "cam_right_wrist"}
 
@@ -43,7 +45,8 @@ def actions_from_openpi(reply: Any, steps: int | None) -> np.ndarray:
     actions = np.asarray(reply["actions"], dtype=np.float64)
     if actions.ndim == 1:
         actions = actions[None]
-    if actions.ndim != 2 or actions.shape[1] < 14:
-        raise RuntimeError(f"openpi actions of shape {actions.shape}, expected (horizon, >=14)")
+    if actions.ndim != 2 or actions.shape[1] < ACTION_DIM:
+        raise RuntimeError(f"openpi actions of shape {actions.shape}, "
+                           f"expected (horizon, >={ACTION_DIM})")
     # models padded to a larger action dim return the ALOHA dims first
-    return actions[: steps or None, :14]
+    return actions[: steps or None, :ACTION_DIM]

@@ -20,6 +20,7 @@ from rmbench.envs.registration import make
 from rmbench.eval.episode import as_chunk
 from rmbench.policies.registry import make_policy, parse_spec
 from rmbench.serve.wire import MAX_MESSAGE_BYTES, PROTOCOL, WireError, pack, unpack
+from rmbench.sim.simulator import ACTION_DIM
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +36,7 @@ class PolicyServer:
 
     def metadata(self, policy) -> dict[str, Any]:
         return {"server": "rmbench", "protocol": PROTOCOL, "policy": self.spec, "task": self.task,
-                "cameras": list(getattr(policy, "cameras", ())), "action_dim": 14}
+                "cameras": list(getattr(policy, "cameras", ())), "action_dim": ACTION_DIM}
 
     def handle(self, ws) -> None:
         env = make(self.task, render=False)  # what the policy is built for (bounds, task)

@@ -14,7 +14,7 @@ from rmbench.sim.geometry import mat_to_quat
 from rmbench.sim.gl import require_rendering
 from rmbench.sim.station import MAX_QVEL, SimulationError, StationConfig, home_action
 
-ACTION_DIM = 14
+ACTION_DIM = 14  # an action, and the joint state: per arm 6 joints then the gripper
 ARM_ENTRIES = np.r_[0:6, 7:13]  # action entries of the 12 arm joints (not the grippers)
 EE_POSE_DIM = 14
 # Renderers freed by the garbage collector after MuJoCo's own exit hook has terminated the

@@ -3,7 +3,9 @@
 A task (1) builds its objects into the station's MjSpec, (2) binds ids after compilation,
 (3) initialises an episode from the Generator handed to ``reset(seed)``, (4) is told after
 every physics step (button counting, event latches), and (5) ``evaluate()``s named
-predicates once per control step. Reward, termination, ``info["is_success"]``, progress and
+predicates once per control step. The env starts an episode through ``start_episode``, which
+does the base's bookkeeping before the task's ``initialize`` hook places the scene, so a task
+cannot forget it. Reward, termination, ``info["is_success"]``, progress and
 the ground-truth subtask all derive from those predicates in :mod:`rmbench.envs.env`.
 """
 
@@ -75,6 +77,17 @@ class Task:
         self._best_progress = 0.0
         self.overrides: dict[str, Any] = {}
 
+    # -- the episode protocol -----------------------------------------------------------
+    def start_episode(self, rng: np.random.Generator,
+                      hidden: dict[str, Any] | None = None) -> None:
+        """A new episode: the hidden variables in ``hidden`` fixed (the rest drawn), stage and
+        progress back to the start, then the task's ``initialize`` draws from ``rng`` and
+        places the scene."""
+        self.set_overrides(hidden)
+        self._stage = 0
+        self._best_progress = 0.0
+        self.initialize(rng)
+
     # -- hooks ------------------------------------------------------------------------
     @property
     def pieces(self) -> tuple:
@@ -93,7 +106,8 @@ class Task:
                          for side in ("left", "right") for f in ("left", "right")}
 
     def initialize(self, rng: np.random.Generator) -> None:
-        """Sample the episode's layout and hidden variables; place everything."""
+        """Sample the episode's layout and hidden variables; place everything. Called by
+        ``start_episode``, never directly."""
         raise NotImplementedError
 
     def on_substep(self) -> None:
@@ -119,7 +133,7 @@ class Task:
 
     # -- shared helpers -----------------------------------------------------------------
     def set_overrides(self, hidden: dict[str, Any] | None) -> None:
-        """Fix hidden variables for the next ``initialize`` (see ``hidden_keys``)."""
+        """Fix hidden variables for the next episode (see ``hidden_keys``)."""
         hidden = dict(hidden or {})
         unknown = sorted(set(hidden) - set(self.hidden_keys))
         if unknown:
@@ -136,10 +150,6 @@ class Task:
         if allowed is not None and value not in allowed:
             raise ValueError(f"{self.name}: hidden {key}={value!r} is not one of {list(allowed)}")
         return value
-
-    def begin_episode(self) -> None:
-        self._stage = 0
-        self._best_progress = 0.0
 
     def advance(self, stage: int, progress: float, solved: bool = False) -> tuple[int, float]:
         """Stages and progress only move forward within an episode. A solved task is done,

@@ -31,7 +31,14 @@ from rmbench.sim.objects import Battery
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.randomization import Uniform
 from rmbench.tasks.registry import register
+
+# Randomization (m, rad), in the order drawn
+HOLDER_X = Uniform(-0.03, 0.03)
+HOLDER_Y = Uniform(-0.10, -0.06)
+BATTERY_Y_OFFSET = Uniform(-0.02, 0.02)  # a battery from the holder's y
+BATTERY_YAW_NOISE = Uniform(-0.25, 0.25)  # added to the battery's pointing along y
 
 PAIRS = ((1, 0), (1, 1), (0, 1))  # candidates for the hidden pair, also the order of tries
 TRIES = ((0, 0), *PAIRS)
@@ -96,16 +103,15 @@ class BatteryTry(Task):
         return (self.holder, self.lamp, *self.batteries)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
-        hx, hy = rng.uniform(-0.03, 0.03), rng.uniform(-0.10, -0.06)
+        hx, hy = HOLDER_X.draw(rng), HOLDER_Y.draw(rng)
         self.holder.move(self.model, (hx, hy))
         self.lamp.move(self.model, (hx, hy + 0.08))
         self.lamp.set(self.model, "off")
         for k, battery in enumerate(self.batteries):
             x = hx + (2 * k - 1) * SIDE_OFFSET
             pointing = np.pi / 2 if rng.uniform() < 0.5 else -np.pi / 2
-            battery.place(self.data, (x, hy + rng.uniform(-0.02, 0.02)),
-                          yaw=pointing + rng.uniform(-0.25, 0.25))
+            battery.place(self.data, (x, hy + BATTERY_Y_OFFSET.draw(rng)),
+                          yaw=pointing + BATTERY_YAW_NOISE.draw(rng))
         drawn = PAIRS[int(rng.integers(len(PAIRS)))]
         self.correct = tuple(self.choose("correct", drawn, PAIRS))
         self.cursor = 0

@@ -9,8 +9,8 @@ a swap parks one cube on a spot 0.1 m in front — and press again.
 Randomization: colours at hues h0, h0 + 1/3, h0 + 2/3 with h0 ~ U[0, 1); slot row x0 + (0,
 0.12, 0.24) with x0 ~ U[-0.06, -0.02], y ~ U[-0.12, -0.08] (the benchmark's x = 0.04..0.28
 shifted towards the centre so both arms reach every slot); the initial order uniformly of the
-six, the target uniformly of the five others; button x ~ U[-0.34, -0.28], y ~ U[-0.12,
--0.04] with its lamp 6 cm behind it.
+six, the target uniformly of the five others; cube yaws ~ U[-0.2, 0.2]; button
+x ~ U[-0.34, -0.28], y ~ U[-0.12, -0.04] with its lamp 6 cm behind it.
 
 Success: the three cubes rest in the slots in the target order and the button is pressed in
 that state (the lamp turns green), no finger touching a cube.
@@ -36,7 +36,15 @@ from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.randomization import Uniform
 from rmbench.tasks.registry import register
+
+# Randomization (m, rad), in the order drawn (after the hue)
+ROW_X0 = Uniform(-0.06, -0.02)  # slot 0; slots 1 and 2 follow SLOT_SPACING apart
+ROW_Y = Uniform(-0.12, -0.08)
+CUBE_YAW = Uniform(-0.2, 0.2)
+BUTTON_X = Uniform(-0.34, -0.28)
+BUTTON_Y = Uniform(-0.12, -0.04)
 
 SLOT_SPACING = 0.12
 SLOT_TOL = 0.03
@@ -115,11 +123,10 @@ class BlocksRankingTry(Task):
         return (*self.cubes, self.button, self.lamp)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         h0 = rng.uniform()
         for k, cube in enumerate(self.cubes):  # colour k: the cube's rank in the target order
             cube.paint(self.model, (*colorsys.hsv_to_rgb((h0 + k / 3) % 1.0, 0.85, 0.9), 1.0))
-        x0, y = rng.uniform(-0.06, -0.02), rng.uniform(-0.12, -0.08)
+        x0, y = ROW_X0.draw(rng), ROW_Y.draw(rng)
         self.slots = np.array([[x0 + k * SLOT_SPACING, y] for k in range(3)])
         initial = PERMUTATIONS[int(rng.integers(6))]
         others = [p for p in PERMUTATIONS if p != initial]
@@ -128,10 +135,10 @@ class BlocksRankingTry(Task):
         self.target = tuple(self.choose("target_order", target, PERMUTATIONS))
         if self.target == self.initial:
             raise ValueError(f"{self.name}: the target order must differ from the initial one")
-        yaws = rng.uniform(-0.2, 0.2, 3)
+        yaws = CUBE_YAW.draw(rng, 3)
         for slot, colour in enumerate(self.initial):
             self.cubes[colour].place(self.data, self.slots[slot], yaw=yaws[slot])
-        bx, by = rng.uniform(-0.34, -0.28), rng.uniform(-0.12, -0.04)
+        bx, by = BUTTON_X.draw(rng), BUTTON_Y.draw(rng)
         self.button.move(self.model, (bx, by))
         self.button.reset()
         self.lamp.move(self.model, (bx, by + 0.06))

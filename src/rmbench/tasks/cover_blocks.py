@@ -29,7 +29,13 @@ from rmbench.sim.objects import Cover, Cube
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.randomization import Uniform
 from rmbench.tasks.registry import register
+
+# Randomization (m, rad), in the order drawn
+ROW_X = Uniform(-0.02, 0.02)  # the middle block
+ROW_Y = Uniform(-0.17, -0.15)
+YAW = Uniform(-0.2, 0.2)  # each block and each cover
 
 COLOURS = {"red": (0.85, 0.1, 0.1, 1.0), "green": (0.1, 0.7, 0.2, 1.0),
            "blue": (0.1, 0.25, 0.85, 1.0)}
@@ -101,11 +107,10 @@ class CoverBlocks(Task):
         return (*self.cubes, *self.covers)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
-        xc, y = rng.uniform(-0.02, 0.02), rng.uniform(-0.17, -0.15)
+        xc, y = ROW_X.draw(rng), ROW_Y.draw(rng)
         order = ORDERS[int(rng.integers(len(ORDERS)))]
         self.colours = tuple(self.choose("colours", order, ORDERS))
-        yaws = rng.uniform(-0.2, 0.2, 6)
+        yaws = YAW.draw(rng, 6)
         for k in range(3):
             x = xc + (k - 1) * SPACING
             self.cubes[k].paint(self.model, COLOURS[self.colours[k]])

@@ -7,11 +7,10 @@ front of the shelf. Pick up the object that matches the reference with the arm o
 Randomization: the reference's shape (cube, bar, tall, cylinder, disc, slab) and colour (red,
 green, blue, yellow) uniformly; each of the four distractors is another shape with
 probability 0.8 (any colour) and else the same shape in another colour, all five distinct;
-positions by rejection in x in [-0.35, 0.35] with |x| >= 0.07, y in [-0.20, -0.05] (the
-benchmark's y in [-0.25, -0.10], 5 cm further from the arm bases so every object is
-reachable from above), footprints at least 1 cm
-apart (grip points 8 cm or more); yaws
-~ U[-0.6, 0.6]. Which of the five is the copy is uniform.
+positions x ~ U[-0.35, 0.35], y ~ U[-0.20, -0.05] (the benchmark's y in [-0.25, -0.10], 5 cm
+further from the arm bases so every object is reachable from above), drawn again while
+|x| < 0.07, two footprints are less than 1 cm apart or two grip points less than 8 cm apart;
+yaws ~ U[-0.6, 0.6]. Which of the five is the copy is uniform.
 
 Observation phase: the first second (20 policy steps at 20 Hz); moving a gripper more than
 3 cm in it fails the episode. Then the screen (0.6 x 0.4 m) stands in front of the shelf for
@@ -35,7 +34,16 @@ from rmbench.sim.objects import SHAPE_COLOURS, SHAPES, Shape, footprint
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.randomization import Uniform
 from rmbench.tasks.registry import register
+
+# Randomization (m, rad), in the order drawn
+OBJECT_X = Uniform(-0.35, 0.35)
+OBJECT_Y = Uniform(-0.20, -0.05)
+OBJECT_YAW = Uniform(-0.6, 0.6)
+MIN_ABS_X = 0.07  # a position nearer x = 0 is drawn again
+FOOTPRINT_GAP = 0.01  # ... as is one whose footprint comes this close to another's
+GRIP_GAP = 0.08  # ... or whose grip point (the centre) this close to another's
 
 N_OBJECTS = 5
 OBSERVE_SECONDS = 1.0
@@ -100,7 +108,6 @@ class ObserveAndPickup(Task):
         self._sites = [model.site(f"{s}/grasp").id for s in ("left", "right")]
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         shapes, colours = list(SHAPES), list(SHAPE_COLOURS)
         ref = (shapes[int(rng.integers(len(shapes)))], colours[int(rng.integers(len(colours)))])
         looks = [ref]
@@ -116,7 +123,7 @@ class ObserveAndPickup(Task):
                 looks.append(look)
         order = rng.permutation(N_OBJECTS)  # object k gets look order[k]; look 0 is the copy
         positions = self._positions(rng, [footprint(looks[i][0]) for i in order])
-        yaws = rng.uniform(-0.6, 0.6, N_OBJECTS)
+        yaws = OBJECT_YAW.draw(rng, N_OBJECTS)
         drawn_target = int(np.flatnonzero(order == 0)[0])
         self.target = self.choose("target", drawn_target, range(N_OBJECTS))
         for k, obj in enumerate(self.objects):
@@ -137,10 +144,10 @@ class ObserveAndPickup(Task):
         while True:
             out: list[np.ndarray] = []
             for _ in range(200):
-                p = np.array([rng.uniform(-0.35, 0.35), rng.uniform(-0.20, -0.05)])
+                p = np.array([OBJECT_X.draw(rng), OBJECT_Y.draw(rng)])
                 k = len(out)
-                if abs(p[0]) >= 0.07 and all(
-                        np.linalg.norm(p - q) >= max(0.08, radii[k] + radii[j] + 0.01)
+                if abs(p[0]) >= MIN_ABS_X and all(
+                        np.linalg.norm(p - q) >= max(GRIP_GAP, radii[k] + radii[j] + FOOTPRINT_GAP)
                         for j, q in enumerate(out)):
                     out.append(p)
                     if len(out) == N_OBJECTS:

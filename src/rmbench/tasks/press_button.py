@@ -5,7 +5,7 @@ and middle buttons showing d1 and d2. Press the left button d1 times and the mid
 d2 times (left arm), then the confirm button once (right arm).
 
 Randomization: d1 ~ U{1..9}, d2 ~ U{1..10-d1}; row y ~ U[-0.16, -0.12]; left button
-x ~ U[-0.30, -0.24], middle 0.13-0.16 m to its right, confirm x ~ U[0.18, 0.26]; tiles
+x ~ U[-0.30, -0.24], middle U[0.13, 0.16] m to its right, confirm x ~ U[0.18, 0.26]; tiles
 0.12 m behind the left and middle buttons.
 
 Success: the confirm button pressed once, when the left count was exactly d1 and the middle
@@ -24,7 +24,14 @@ import numpy as np
 from rmbench.sim.fixtures import Button, NumberTile
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.randomization import Uniform
 from rmbench.tasks.registry import register
+
+# Randomization (m), in the order drawn (after the digits)
+ROW_Y = Uniform(-0.16, -0.12)
+LEFT_X = Uniform(-0.30, -0.24)
+MIDDLE_GAP = Uniform(0.13, 0.16)  # the middle button from the left one
+CONFIRM_X = Uniform(0.18, 0.26)
 
 TILE_OFFSET = 0.12
 
@@ -83,15 +90,14 @@ class PressButton(Task):
         return (*self.buttons.values(), *self.tiles)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         d1 = int(rng.integers(1, 10))
         d2 = int(rng.integers(1, 11 - d1))
         self.d1 = self.choose("d1", d1, range(1, 10))
         self.d2 = self.choose("d2", min(d2, 10 - self.d1), range(1, 11 - self.d1))
-        y = rng.uniform(-0.16, -0.12)
-        xl = rng.uniform(-0.30, -0.24)
-        xm = xl + rng.uniform(0.13, 0.16)
-        xc = rng.uniform(0.18, 0.26)
+        y = ROW_Y.draw(rng)
+        xl = LEFT_X.draw(rng)
+        xm = xl + MIDDLE_GAP.draw(rng)
+        xc = CONFIRM_X.draw(rng)
         for button, x in ((self.left, xl), (self.middle, xm), (self.confirm, xc)):
             button.move(self.model, (x, y))
             button.reset()

@@ -26,7 +26,16 @@ from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.randomization import Uniform
 from rmbench.tasks.registry import register
+
+# Randomization (m, rad), in the order drawn
+CENTRE_X = Uniform(-0.02, 0.06)  # the point the four mats lie around
+CENTRE_Y = Uniform(-0.115, -0.095)
+MAT_OFFSET = Uniform(0.10, 0.13)  # each mat from the centre
+BUTTON_X = Uniform(-0.38, -0.30)
+BUTTON_Y = Uniform(-0.22, -0.12)
+CUBE_YAW = Uniform(-0.4, 0.4)
 
 MAT_NAMES = ("left", "right", "front", "back")
 MAT_DIRECTIONS = {"left": (-1, 0), "right": (1, 0), "front": (0, -1), "back": (0, 1)}
@@ -76,16 +85,15 @@ class PutBackBlock(Task):
         return (*self.mats.values(), self.button, self.cube)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
-        self.centre = np.array([rng.uniform(-0.02, 0.06), rng.uniform(-0.115, -0.095)])
-        d = rng.uniform(0.10, 0.13)
+        self.centre = np.array([CENTRE_X.draw(rng), CENTRE_Y.draw(rng)])
+        d = MAT_OFFSET.draw(rng)
         for n, mat in self.mats.items():
             mat.move(self.model, self.centre + d * np.asarray(MAT_DIRECTIONS[n]))
         self.original = self.choose("original_mat", MAT_NAMES[int(rng.integers(4))], MAT_NAMES)
-        self.button.move(self.model, (rng.uniform(-0.38, -0.30), rng.uniform(-0.22, -0.12)))
+        self.button.move(self.model, (BUTTON_X.draw(rng), BUTTON_Y.draw(rng)))
         self.button.reset()
         self.cube.place(self.data, self.mats[self.original].xy(self.model),
-                        yaw=rng.uniform(-0.4, 0.4))
+                        yaw=CUBE_YAW.draw(rng))
         self.pressed_at_centre = False
         self.press_without_centre = False
 

@@ -30,7 +30,15 @@ from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.randomization import Uniform
 from rmbench.tasks.registry import register
+
+# Randomization (m, rad), in the order drawn
+ROW_X0 = Uniform(-0.06, -0.02)  # slot 0; slots 1 and 2 follow SLOT_SPACING apart
+ROW_Y = Uniform(-0.15, -0.08)
+CUBE_YAW = Uniform(-0.3, 0.3)  # one yaw for both cubes
+BUTTON_X = Uniform(-0.32, -0.24)
+BUTTON_Y = Uniform(-0.22, -0.12)
 
 SLOT_TOL = 0.03
 SLOT_SPACING = 0.12
@@ -87,17 +95,16 @@ class RearrangeBlocks(Task):
         return (*self.mats.values(), self.button, *self.cubes)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
-        x0, y = rng.uniform(-0.06, -0.02), rng.uniform(-0.15, -0.08)
+        x0, y = ROW_X0.draw(rng), ROW_Y.draw(rng)
         self.slots = np.array([[x0 + k * SLOT_SPACING, y] for k in range(3)])
         self.mats["left"].move(self.model, self.slots[0])
         self.mats["right"].move(self.model, self.slots[2])
         self.loaded = self.choose("loaded_mat", MAT_SIDES[int(rng.integers(2))], MAT_SIDES)
-        yaw = rng.uniform(-0.3, 0.3)
+        yaw = CUBE_YAW.draw(rng)
         # cube_a starts on a mat (the one to bring back), cube_b in the middle slot.
         self.cubes[0].place(self.data, self.mat_slot(self.loaded), yaw=yaw)
         self.cubes[1].place(self.data, self.slots[1], yaw=yaw)
-        self.button.move(self.model, (rng.uniform(-0.32, -0.24), rng.uniform(-0.22, -0.12)))
+        self.button.move(self.model, (BUTTON_X.draw(rng), BUTTON_Y.draw(rng)))
         self.button.reset()
         self.pressed_on_mats = False
         self.early_press = False

@@ -6,8 +6,8 @@ on a tie) to the empty tray, the second cube into the first one's tray, the firs
 the second one's tray — then press the button.
 
 Randomization: tray row centre x ~ U[-0.02, 0.02], y ~ U[-0.09, -0.05], trays 0.14 m apart;
-the empty tray uniformly of the three; each cube jittered by up to 8 mm in its tray with yaw
-~ U[-0.2, 0.2]; button x ~ U[-0.05, 0.05], y ~ U[-0.24, -0.20] (the benchmark's y = -0.28,
+the empty tray uniformly of the three; each cube offset in its tray by U[-0.008, 0.008] in x
+and in y, with yaw ~ U[-0.2, 0.2]; button x ~ U[-0.05, 0.05], y ~ U[-0.24, -0.20] (the benchmark's y = -0.28,
 brought 4-8 cm nearer the trays so the arms press it from above).
 
 Success: each cube rests in the tray where the other started, the cubes were never stacked,
@@ -29,7 +29,16 @@ from rmbench.sim.objects import Cube
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.randomization import Uniform
 from rmbench.tasks.registry import register
+
+# Randomization (m, rad), in the order drawn
+ROW_X = Uniform(-0.02, 0.02)  # the middle tray's centre
+ROW_Y = Uniform(-0.09, -0.05)
+CUBE_OFFSET = Uniform(-0.008, 0.008)  # a cube from its tray's centre, in x and in y
+CUBE_YAW = Uniform(-0.2, 0.2)
+BUTTON_X = Uniform(-0.05, 0.05)
+BUTTON_Y = Uniform(-0.24, -0.20)
 
 TRAY_SPACING = 0.14
 CUBE_RGBA = (0.95, 0.55, 0.1, 1.0)
@@ -91,16 +100,15 @@ class SwapBlocks(Task):
         return (*self.trays, self.button, *self.cubes)
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
-        xc, y = rng.uniform(-0.02, 0.02), rng.uniform(-0.09, -0.05)
+        xc, y = ROW_X.draw(rng), ROW_Y.draw(rng)
         for k, tray in enumerate(self.trays):
             tray.move(self.model, (xc + (k - 1) * TRAY_SPACING, y))
         self.empty = self.choose("empty_tray", int(rng.integers(3)), range(3))
         for cube, tray in zip(self.cubes, roles(self.empty), strict=True):
-            jitter = rng.uniform(-0.008, 0.008, 2)
-            cube.place(self.data, self.trays[tray].xy(self.model) + jitter,
-                       yaw=rng.uniform(-0.2, 0.2))
-        self.button.move(self.model, (rng.uniform(-0.05, 0.05), rng.uniform(-0.24, -0.20)))
+            offset = CUBE_OFFSET.draw(rng, 2)
+            cube.place(self.data, self.trays[tray].xy(self.model) + offset,
+                       yaw=CUBE_YAW.draw(rng))
+        self.button.move(self.model, (BUTTON_X.draw(rng), BUTTON_Y.draw(rng)))
         self.button.reset()
         self.is_stacked = self.early_press = self.swapped_at_press = False
 

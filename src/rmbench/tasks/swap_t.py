@@ -4,8 +4,8 @@ Task: a red and a blue T-shaped block lie on the table side by side, each turned
 yaw. Pick both up (one per arm), then put each one down where the other lay, in the other's
 orientation.
 
-Randomization: T centres (the middle of the stem) at x ~ -0.09 and +0.09 (each +-1 cm),
-y ~ U[-0.15, -0.10]; yaws ~ U[-0.75, 0.75]; which colour lies left uniformly.
+Randomization: which colour lies left uniformly; yaws ~ U[-0.75, 0.75]; T centres (the middle
+of the stem) at x = -0.09 and +0.09, each plus U[-0.01, 0.01], y ~ U[-0.15, -0.10].
 
 Success: each T within 2.5 cm (xy) and 15 degrees of the other's starting pose, resting on
 the table, neither touched by a finger.
@@ -24,7 +24,14 @@ from rmbench.sim.objects import TBlock
 from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
+from rmbench.tasks.randomization import Uniform
 from rmbench.tasks.registry import register
+
+SIDE_X = 0.09  # m: the left T's centre lies near x = -SIDE_X, the right one's near +SIDE_X
+# Randomization (m, rad), in the order drawn
+YAW = Uniform(-0.75, 0.75)
+CENTRE_X_OFFSET = Uniform(-0.01, 0.01)  # from -SIDE_X or +SIDE_X
+CENTRE_Y = Uniform(-0.15, -0.10)
 
 POS_TOL = 0.025
 YAW_TOL = np.deg2rad(15)
@@ -69,15 +76,15 @@ class SwapT(Task):
         return self.blocks
 
     def initialize(self, rng: np.random.Generator) -> None:
-        self.begin_episode()
         colours = COLOURS if rng.uniform() < 0.5 else COLOURS[::-1]
-        yaws = tuple(float(y) for y in rng.uniform(-0.75, 0.75, 2))
+        yaws = tuple(float(y) for y in YAW.draw(rng, 2))
         yaws = self.choose("yaws", yaws)
-        if len(yaws) != 2 or max(abs(float(y)) for y in yaws) > 0.75:
-            raise ValueError(f"{self.name}: yaws must be two angles in [-0.75, 0.75], got {yaws}")
+        if len(yaws) != 2 or not all(float(y) in YAW for y in yaws):
+            raise ValueError(f"{self.name}: yaws must be two angles in "
+                             f"[{YAW.low}, {YAW.high}], got {yaws}")
         for k, block in enumerate(self.blocks):
-            x = (2 * k - 1) * 0.09 + rng.uniform(-0.01, 0.01)
-            y = rng.uniform(-0.15, -0.10)
+            x = (2 * k - 1) * SIDE_X + CENTRE_X_OFFSET.draw(rng)
+            y = CENTRE_Y.draw(rng)
             self.starts[k] = (x, y, float(yaws[k]))
             block.paint(self.model, colours[k])
             block.place(self.data, (x, y), yaw=float(yaws[k]))

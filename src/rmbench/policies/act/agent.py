@@ -16,6 +16,10 @@ from rmbench.policies.visuomotor import VisuomotorPolicy, train_visuomotor
 
 
 class ACTPolicy(VisuomotorPolicy):
+    """An ACT checkpoint in the closed loop: each 20 Hz step's observation in, one 14-d joint
+    target out. A chunk is predicted every step and the predictions for the step averaged
+    (temporal ensembling), or without it every ``execute`` steps."""
+
     name = "act"
     config_cls = ACTConfig
     model_cls = ACTModel

@@ -10,6 +10,8 @@ from rmbench.policies.visuomotor import VisuomotorConfig
 
 @dataclass(frozen=True)
 class ACTConfig(VisuomotorConfig):
+    """ACT's fields beside the baselines' shared ones; the defaults are the CPU-sized model."""
+
     obs_steps: int = 1
     """ACT sees the current step only."""
     horizon: int = 50

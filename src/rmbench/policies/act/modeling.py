@@ -23,7 +23,8 @@ from rmbench.data import layout as L
 from rmbench.policies.act.config import ACTConfig
 from rmbench.policies.nn.embeddings import sincos_1d, sincos_2d
 from rmbench.policies.nn.normalize import Normalizer
-from rmbench.policies.visuomotor import ACTION_DIM, VisuomotorTrainer, observation_encoder
+from rmbench.policies.visuomotor import VisuomotorTrainer, observation_encoder
+from rmbench.sim.simulator import ACTION_DIM
 
 
 def _encoder(cfg: ACTConfig) -> nn.TransformerEncoder:
@@ -34,6 +35,10 @@ def _encoder(cfg: ACTConfig) -> nn.TransformerEncoder:
 
 
 class ACTModel(nn.Module):
+    """ACT's network: one control step's observation (camera images, or the environment state)
+    and the joint state in, a normalised chunk of ``horizon`` joint targets (B, k, 14) out. The
+    CVAE encoder that draws the style variable z runs in training only."""
+
     def __init__(self, cfg: ACTConfig, state_dim: int = 0):
         super().__init__()
         self.cfg = cfg
@@ -89,12 +94,17 @@ class ACTModel(nn.Module):
 
     def predict(self, window: list[torch.Tensor], state: torch.Tensor,
                 generator: torch.Generator | None) -> torch.Tensor:
+        """The normalised chunk (B, k, 14) from the window's last step (ACT sees one) and the
+        raw joint state, with z = 0: deterministic, ``generator`` is not drawn from."""
         tokens = window[-1]
         z = torch.zeros(tokens.shape[0], self.cfg.latent_dim, device=tokens.device)
         return self.decode(tokens, state, z)
 
 
 class ACTTrainer(VisuomotorTrainer):
+    """ACT's training step on a batch of frames and their chunks: L1 over the chunk's real
+    steps plus ``kl_weight`` times the KL of z's posterior from N(0, I)."""
+
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
         model = self.model
         tokens = self.observe(batch)[:, -1]

@@ -8,6 +8,9 @@ from rmbench.policies.visuomotor import VisuomotorPolicy, train_visuomotor
 
 
 class DPPolicy(VisuomotorPolicy):
+    """A Diffusion Policy checkpoint in the closed loop: each 20 Hz step's observation in, one
+    14-d joint target out; a chunk is sampled every ``execute`` steps (8 of its 16 by default)."""
+
     name = "dp"
     config_cls = DPConfig
     model_cls = DiffusionPolicyModel

@@ -10,6 +10,9 @@ from rmbench.policies.visuomotor import VisuomotorConfig
 
 @dataclass(frozen=True)
 class DPConfig(VisuomotorConfig):
+    """Diffusion Policy's fields beside the baselines' shared ones; the defaults are the
+    CPU-sized model."""
+
     obs_steps: int = 2
     """Observation horizon (the paper's T_o = 2): the current and the previous step."""
     horizon: int = 16

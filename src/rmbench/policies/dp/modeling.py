@@ -19,10 +19,15 @@ from rmbench.policies.nn.diffusion import DDPMSchedule
 from rmbench.policies.nn.ema import EMA
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.unet1d import ConditionalUnet1D
-from rmbench.policies.visuomotor import ACTION_DIM, VisuomotorTrainer, observation_encoder
+from rmbench.policies.visuomotor import VisuomotorTrainer, observation_encoder
+from rmbench.sim.simulator import ACTION_DIM
 
 
 class DiffusionPolicyModel(nn.Module):
+    """Diffusion Policy's network: the last ``obs_steps`` control steps' features (camera images
+    or the environment state, with the joint state) in, a normalised chunk of ``horizon``
+    joint targets (B, H, 14) out, denoised from Gaussian noise in ``ddim_steps`` steps."""
+
     def __init__(self, cfg: DPConfig, state_dim: int = 0):
         super().__init__()
         self.cfg = cfg
@@ -42,6 +47,8 @@ class DiffusionPolicyModel(nn.Module):
 
     def predict(self, window: list[torch.Tensor], state: torch.Tensor,
                 generator: torch.Generator | None) -> torch.Tensor:
+        """The normalised chunk (B, H, 14) sampled by DDIM, conditioned on the window's
+        features (oldest first); its starting noise comes from ``generator``."""
         cond = torch.cat(window, -1)
         return self.schedule.ddim_sample(lambda x, k: self.noise(x, k, cond),
                                          (cond.shape[0], self.cfg.horizon, ACTION_DIM),

@@ -20,6 +20,9 @@ from rmbench.policies.nn.embeddings import time_embedding
 
 
 class FlowMatchingHead(nn.Module):
+    """Context tokens in, a chunk (B, H, A) of normalised actions out, sampled from noise in
+    ``steps`` Euler steps; trained on the velocity (see the module docstring)."""
+
     def __init__(self, dim: int, horizon: int, action_dim: int, layers: int, heads: int,
                  patch: int = 1):
         super().__init__()

@@ -55,6 +55,10 @@ def load_mem0(path: str | Path, ablations: tuple[str, ...] = (),
 
 
 class Mem0Policy(BasePolicy):
+    """A Mem-0 checkpoint in the closed loop: each 20 Hz step's observation in, one 14-d joint
+    target out. It keeps the memories across the episode and, on an M(n) task, the planner's
+    current subtask (``status()``), which moves on when the end classifier says it has ended."""
+
     def __init__(self, arg: str, env=None):
         path, overrides, options = parse_argument(arg, Mem0Config, extra=("ablation",))
         ablations = tuple(a for a in options.get("ablation", "").split(",") if a)
@@ -108,6 +112,9 @@ class Mem0Policy(BasePolicy):
 
     @inference
     def act(self, observation: dict[str, Any]) -> np.ndarray:
+        """One control step: the observation in, the next 14-d joint target out. A new chunk is
+        sampled when the last one's ``execute`` actions are used up (with temporal ensembling,
+        every ``ensemble_every`` steps)."""
         cfg, ex = self.cfg, self.model.executor
         inputs = self.inputs(observation)
         tokens, z = ex.encode(inputs)

@@ -18,6 +18,8 @@ ABLATIONS = TRAINED_ABLATIONS + INFERENCE_ABLATIONS
 
 @dataclass(frozen=True)
 class Mem0Config(ReadsObservation, PolicyConfig):
+    """Mem-0's settings, every field documented; the defaults are the CPU-sized model."""
+
     # changeable at evaluation without retraining: mem0:CKPT?execute=5&flow_steps=20
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps", "sample_noise",
                                                    "temporal_ensemble", "ensemble_every")

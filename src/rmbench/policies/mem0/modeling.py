@@ -31,11 +31,14 @@ from rmbench.policies.observation import (
     position_noise_scale,
     state_noise_scale,
 )
-
-ACTION_DIM = 14  # the joint state (and the joint action space)
+from rmbench.sim.simulator import ACTION_DIM
 
 
 class Executor(nn.Module):
+    """Mem-0's executor: each 20 Hz step's observation, the subtask's text and the memories in,
+    c_t out; from c_t the logit that the subtask has ended, and with the joint state a
+    normalised chunk of ``horizon`` actions (flow matching) whenever the policy needs one."""
+
     def __init__(self, cfg: Mem0Config, texts: list[str], text_vectors: torch.Tensor | None,
                  state_dim: int = 0):
         super().__init__()

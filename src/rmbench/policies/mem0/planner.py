@@ -28,6 +28,9 @@ MAX_KEYS = 32  # positions beyond this share the last embedding
 
 
 class Planner(nn.Module):
+    """Mem-0's planner: o_0's embedding and the key memory in, logits over the task's subtask
+    texts and "done" out. Called at an episode's start and when a subtask ends, not every step."""
+
     def __init__(self, cfg, texts: list[str], text_vectors: torch.Tensor | None,
                  state_dim: int = 0):
         super().__init__()

@@ -50,6 +50,9 @@ def _language_model(name: str):
 
 
 class VLMPlanner(nn.Module):
+    """The planner on a language model with LoRA adapters: the same inputs and outputs as
+    ``Planner`` (o_0 and the key memory in, logits over the subtask texts and "done" out)."""
+
     def __init__(self, cfg, texts: list[str], text_vectors=None, state_dim: int = 0):
         super().__init__()
         from peft import LoraConfig, get_peft_model

@@ -14,13 +14,14 @@ import torch
 from torch import nn
 
 from rmbench.data import layout as L
+from rmbench.sim.simulator import ACTION_DIM
 
 # 6 joints, gripper, 6 joints, gripper
 JOINTS = np.array([True] * 6 + [False] + [True] * 6 + [False])
 
 
 class Normalizer(nn.Module):
-    def __init__(self, dim: int = 14, action_dim: int | None = None):
+    def __init__(self, dim: int = ACTION_DIM, action_dim: int | None = None):
         super().__init__()
         action_dim = dim if action_dim is None else action_dim
         self.register_buffer("state_mean", torch.zeros(dim))

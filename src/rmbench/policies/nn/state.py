@@ -21,6 +21,7 @@ from torch import nn
 from rmbench.policies.action_space import EE_DIM, EEActions
 from rmbench.sim import robot
 from rmbench.sim.kinematics import reach_grid
+from rmbench.sim.simulator import ACTION_DIM
 
 STD_FLOOR = 1e-2
 CONSTANT = 1e-6  # a spread below this is an entry the dataset never varies
@@ -57,7 +58,7 @@ class StateEncoder(nn.Module):
     either. Two hidden GELU layers of width ``hidden``, a LayerNorm per token."""
 
     def __init__(self, state_dim: int, dim: int, tokens: int = 1, hidden: int = 256,
-                 agent_dim: int = 14, grasp_pose: bool = False, reach: int = 0):
+                 agent_dim: int = ACTION_DIM, grasp_pose: bool = False, reach: int = 0):
         super().__init__()
         if state_dim < 1:
             raise ValueError("a state encoder needs the environment state's length (>= 1)")
