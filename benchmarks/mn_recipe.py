@@ -1,0 +1,63 @@
+"""Record one Mem-0 recipe candidate's M(n) cells in benchmarks/results/mn_recipe.json.
+
+Each candidate is a named change to the state table's recipe (its data, training or
+inference), measured on the rows it touches with the table's own command; this file keeps
+what was tried beside the table's reference cells, each cell with its Wilson interval, its
+endings and, for cells whose policy declares subtask ends, where it declared them against
+the simulator (``rmbench boundaries``).
+
+    python benchmarks/mn_recipe.py --table runs/table_state --name NAME --changes "..." \\
+        --tasks press_button --specs mem0,mem0:gt_classifier
+
+A candidate recorded again replaces its earlier entry; the file is written atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from rmbench.eval.boundaries import summarize
+from rmbench.eval.harness import read_records
+from rmbench.video import write_atomic
+
+OUT = Path(__file__).resolve().parent / "results" / "mn_recipe.json"
+KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",
+        "failure_reasons", "train_wall_s", "eval_wall_s", "machines")
+
+
+def cell(row: dict, task: str) -> dict:
+    out = {k: row.get(k) for k in KEEP}
+    out["boundaries"] = summarize(read_records(Path(row["evaluation"]) / task / "episodes.jsonl"))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--table", required=True, help="an `rmbench table` folder (its table.json)")
+    p.add_argument("--name", required=True)
+    p.add_argument("--changes", required=True, help="what the candidate changes, in words")
+    p.add_argument("--tasks", required=True)
+    p.add_argument("--specs", required=True)
+    p.add_argument("--out", type=Path, default=OUT)
+    args = p.parse_args(argv)
+    res = json.loads((Path(args.table) / "table.json").read_text())
+    cells = {}
+    for task in args.tasks.split(","):
+        for spec in args.specs.split(","):
+            row = res["cells"].get(task, {}).get(spec)
+            if row is None:
+                raise SystemExit(f"{args.table}: {task} {spec} is not evaluated yet")
+            cells.setdefault(task, {})[spec] = cell(row, task)
+    doc = json.loads(args.out.read_text()) if args.out.exists() else {"candidates": []}
+    entry = {"name": args.name, "changes": args.changes, "command": res.get("command", ""),
+             "plan": res.get("plan"), "cells": cells}
+    doc["candidates"] = [c for c in doc["candidates"] if c["name"] != args.name] + [entry]
+    write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
