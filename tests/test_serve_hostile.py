@@ -280,8 +280,9 @@ def test_origins_are_checked_when_given():
         url = f"ws://127.0.0.1:{s.port}"
         with pytest.raises(InvalidStatus, match="403"):
             connect(url, origin="https://evil.example")
-        with connect(url, origin="https://ok.example") as ws:
-            assert unpack(ws.recv(timeout=10))["server"] == "rmbench"
+        for origin in ("https://ok.example", None):  # a listed page, a client that is no page
+            with connect(url, origin=origin) as ws:
+                assert unpack(ws.recv(timeout=10))["server"] == "rmbench"
     finally:
         s.stop()
 

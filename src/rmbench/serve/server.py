@@ -60,7 +60,8 @@ class PolicyServer:
                              f"{max_connections} and {idle_timeout}")
         self.spec, self.task, self.host, self.port = policy, get_task(task).name, host, port
         self.max_connections, self.idle_timeout = max_connections, idle_timeout
-        self.origins = origins
+        # browsers always send their page's Origin; other clients (rmbench's, openpi's) none
+        self.origins = [*origins, None] if origins else None
         options = env_options(policy)
         obs_type = options.get("obs_type", PIXELS_OBS_TYPE)
         # the policy reads the env's bounds and task only: it is never stepped here
