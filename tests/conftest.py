@@ -1,5 +1,7 @@
+import copy
 import os
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -60,6 +62,30 @@ def mn_dataset(tmp_path_factory):
     collect(CollectConfig("press_button", out, episodes=2, seed=0, cameras=("head", "left_wrist"),
                           width=64, height=48, progress=False))
     return out
+
+
+# out folder -> the module a training's last save exported, as it was in memory (keep_exports)
+EXPORTED: dict = {}
+
+
+@contextmanager
+def keep_exports():
+    """While open, every training's saves also keep a copy of the module they export: what a
+    checkpoint's round trip must reproduce, not another load of the same file."""
+    from rmbench.training import loop
+
+    real = loop._export
+
+    def export(out, model, identity, step, write_checkpoint):
+        real(out, model, identity, step, write_checkpoint)
+        module = model.export_module() if hasattr(model, "export_module") else model
+        EXPORTED[Path(out)] = copy.deepcopy(module).eval()
+
+    loop._export = export
+    try:
+        yield
+    finally:
+        loop._export = real
 
 
 @pytest.fixture
