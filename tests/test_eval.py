@@ -111,10 +111,13 @@ def test_sigkill_and_resume_gives_exactly_n_unique_episodes(tmp_path):
     path = out / TASK / "episodes.jsonl"
     deadline = time.time() + 120
     while not (path.exists() and path.read_text().count("\n") >= 1) and time.time() < deadline:
+        assert proc.poll() is None, "the evaluation ended before it was killed"
         time.sleep(0.02)
     os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
-    assert subprocess.run(cmd, capture_output=True, env=env).returncode == 0
+    assert proc.wait(timeout=30) == -signal.SIGKILL  # killed, not finished
+    # killed with its work unfinished: a resume has episodes to add
+    assert 1 <= path.read_text().count("\n") < 4
+    assert subprocess.run(cmd, capture_output=True, env=env, timeout=300).returncode == 0
     seeds = [r["seed"] for r in read_records(path)]
     assert len(seeds) == 4 and len(set(seeds)) == 4
 
