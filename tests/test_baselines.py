@@ -156,6 +156,7 @@ OVERFIT = {"dp": (400, {"down_dims": (64, 128, 256)}, 0.5, 0.9),
            "act": (300, {}, 0.3, 0.5)}
 
 
+@pytest.mark.slow  # hundreds of pixel training steps: minutes of a shared CPU per policy
 @pytest.mark.parametrize("name", sorted(BASELINES))
 def test_baseline_overfits_a_tiny_dataset(name, dataset, tmp_path):
     base, _, policy_cls = BASELINES[name]

@@ -152,6 +152,7 @@ def sampled_action_error(model, dataset) -> float:
     return float(np.mean(errors))
 
 
+@pytest.mark.slow  # 300 pixel training steps: minutes of a shared CPU
 def test_executor_overfits_a_tiny_dataset(dataset, tmp_path):
     import csv
 
