@@ -244,3 +244,34 @@ def test_cli_check_and_collect_errors_are_one_line(dataset, tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_:  # argparse's own usage error
         main(["collect", TASK, "--out", str(tmp_path / "x"), "--resolution", "320by240"])
     assert exit_.value.code == 2 and "resolution must look like 320x240" in capsys.readouterr().err
+
+
+def test_every_push_of_press_button_is_its_own_subtask():
+    # press_button's plan repeats "press the left button once" d1 times: each push must end in
+    # the data (one end flag, one key frame) where the simulator counts it, or the planner
+    # cannot count pushes.
+    env = make("press_button", obs_type="environment_state_agent_pos")
+    seed = 100001  # d1 = 4, d2 = 6: eleven plan steps
+    _, info = env.reset(seed=seed)
+    traj = run_expert(env, make_expert(env), seed)
+    assert traj.success
+    ends = np.flatnonzero(writer.subtask_ends(np.asarray(traj.step)))
+    assert [traj.subtask[e] for e in ends] == info["plan"] and len(info["plan"]) == 11
+    # an end frame's action is the one after which the simulator's count of steps went up
+    env.reset(seed=seed)
+    counted = []
+    for t, action in enumerate(traj.executed):
+        *_, step_info = env.step(action)
+        if step_info["subtask_end"]:
+            counted.append(t)
+    assert counted == ends.tolist() and ends[-1] == len(traj) - 1
+    env.close()
+
+
+def test_a_dataset_of_the_previous_format_is_refused_in_one_line(dataset, tmp_path):
+    root = copy(dataset, tmp_path)
+    meta = json.loads((root / L.RMBENCH).read_text())
+    (root / L.RMBENCH).write_text(json.dumps({**meta, "format": "rmbench/1"}))
+    with pytest.raises(DatasetError, match=r"format 'rmbench/1'.*collect it again") as err:
+        check_dataset(root)
+    assert "\n" not in str(err.value)

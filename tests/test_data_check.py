@@ -70,6 +70,10 @@ REFUSALS = {
     "task index": r"task_index outside",
     "subtask index": r"subtask_index outside",
     "subtask end": r"subtask_end flags do not mark",
+    "subtask step": r"subtask_step does not count the plan's steps up from 0",
+    "format": r"rmbench\.json: dataset format 'rmbench/1'",
+    "required feature": r"info\.json: no feature '[\w.]+'",
+    "subtask within a step": r"subtask_index changes within a plan step",
     "video missing": r"file-001\.mp4: missing",
     "video unreadable": r"file-001\.mp4: not a readable video",
     "video frames": r"frames, the episode has",
@@ -184,6 +188,7 @@ def corruptions(dataset):
     # meta/rmbench.json, stats.json, the tasks table
     add("rmbench: no task", edit_json(L.RMBENCH, lambda d: d.pop("task")))
     add("rmbench: task number", edit_json(L.RMBENCH, lambda d: d.update(task=1)))
+    add("rmbench: format", edit_json(L.RMBENCH, lambda d: d.update(format="rmbench/1")))
     add("stats: not an object", edit_json(L.STATS, lambda d: [d], replace=True))
     add("stats: no action", edit_json(L.STATS, lambda d: d.pop(L.ACTION)))
     add("tasks: no task_index", edit_parquet(L.TASKS, drop("task_index")))
@@ -227,6 +232,10 @@ def corruptions(dataset):
         L.SUBTASK_INDEX, lambda c: set_value(c, 99))))
     add("data: subtask_index swapped", edit_parquet(data, replace_column(
         L.SUBTASK_INDEX, lambda c: set_value(c, 1))))
+    add("data: subtask_step from 1", edit_parquet(data, replace_column(
+        L.SUBTASK_STEP, lambda c: pc.add(c, 1))))
+    add("data: progress gone", lambda root: (edit_info(lambda d: d["features"].pop(L.PROGRESS))(root),
+                                             edit_parquet(data, drop(L.PROGRESS))(root)))
     add("data: subtask_end flipped", edit_parquet(data, replace_column(
         L.SUBTASK_END, lambda c: set_value(c, not c[0].as_py()))))
     add("data: action NaN", edit_parquet(data, replace_column(L.ACTION, with_nan)))

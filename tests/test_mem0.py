@@ -75,7 +75,14 @@ def test_anchor_is_the_first_frame_of_the_subtask_and_stays(mn_ckpt):
     policy.act(obs)
     tokens, _ = ex.encode(policy.inputs(obs))
     assert torch.allclose(policy.memory.anchor[0], tokens[0])
-    assert int(policy.memory.valid.sum()) <= 1
+    # The window is filled on the subtask's own phase, as training walks it: the subtask's
+    # first frame (here the episode's sixth, odd) is pushed, then every memory_every-th.
+    assert policy.t == 6 and int(policy.memory.valid.sum()) == 1
+    filled = []
+    for _ in range(4):
+        policy.act(obs)
+        filled.append(int(policy.memory.valid.sum()))
+    assert TINY.memory_every == 2 and filled == [1, 2, 2, 3]
     env.close()
 
 
@@ -89,8 +96,8 @@ def test_debounce_needs_l_consecutive_positives():
 def test_end_labels_mark_the_last_l_frames_of_each_subtask():
     idx = np.array([0, 0, 0, 0, 1, 1, 2, 2, 2])
     assert end_labels(idx, 2).tolist() == [0, 0, 1, 1, 1, 1, 0, 1, 1]
-    assert runs(idx) == [(0, 3), (1, 5), (2, 8)]
-    ex = planner_examples(7, idx, done_index=9)
+    assert runs(idx, idx) == [(0, 3), (1, 5), (2, 8)]
+    ex = planner_examples(7, idx, idx, done_index=9)
     assert [x.target for x in ex] == [0, 1, 2, 9]
     assert ex[2].keys == ((0, 3), (1, 5)) and ex[2].current == 5
 

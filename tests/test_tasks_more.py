@@ -3,6 +3,7 @@ up directly (no expert)."""
 
 import numpy as np
 
+from rmbench.envs.registration import make
 from rmbench.sim.station import TABLE_TOP
 from tests.test_tasks import press, settle, task_env
 
@@ -188,4 +189,15 @@ def test_battery_polarity_is_hidden_from_the_head_camera_once_inserted():
             frames.append(sim.render(["head"])["head"].astype(int))
         differing = int((np.abs(frames[0] - frames[1]).max(-1) > 10).sum())
         assert differing == 0, f"seed {seed}: {differing} pixels tell the polarity"
+    env.close()
+
+
+def test_cover_blocks_plan_names_each_cover_by_where_it_stands():
+    # The uncover steps go red, green, blue; each names the position of that colour's block,
+    # so the planner (which saw the colours) tells the executor which cover to lift.
+    env = make("cover_blocks", obs_type="environment_state_agent_pos")
+    _, info = env.reset(seed=100000, options={"hidden": {"colours": ("blue", "red", "green")}})
+    subtasks = type(env.unwrapped.task).subtasks
+    assert [subtasks[i] for i in info["plan"][3:]] == [
+        "uncover the middle block", "uncover the right block", "uncover the left block"]
     env.close()

@@ -55,6 +55,29 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_boundaries(args) -> int:
+    from pathlib import Path
+
+    from rmbench.eval.boundaries import VERDICTS, summarize
+    from rmbench.eval.harness import read_records
+
+    folder = Path(args.dir)
+    tasks = sorted(p.parent.name for p in folder.glob("*/episodes.jsonl"))
+    if not tasks:
+        raise ValueError(f"{folder}: no <task>/episodes.jsonl (not an `rmbench eval` folder)")
+    print("| task | episodes | " + " | ".join(VERDICTS) + " | median delay | first wrong |")
+    print("|---|---|" + "---|" * len(VERDICTS) + "---|---|")
+    for task in tasks:
+        s = summarize(read_records(folder / task / "episodes.jsonl"))
+        if s is None:
+            print(f"| {task} | no subtask ends declared by the policy |" + " |" * (len(VERDICTS) + 1))
+            continue
+        first = ", ".join(f"{k} {v}" for k, v in s["first_wrong"].items()) or "-"
+        print(f"| {task} | {s['episodes']} | " + " | ".join(str(s[v]) for v in VERDICTS)
+              + f" | {s['median_delay']} | {first} |")
+    return 0
+
+
 def cmd_table(args) -> int:
     import shlex
     from pathlib import Path
@@ -144,6 +167,11 @@ def add_parsers(sub) -> None:
     p.add_argument("--labels", nargs="+", metavar="NAME",
                    help="column names, one per DIR in order (default: the policy spec)")
     p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("boundaries", help="where a policy declared its subtask ends against "
+                       "where the simulator counted them (early, on time, late, missed, false)")
+    p.add_argument("dir", help="an `rmbench eval` folder")
+    p.set_defaults(func=cmd_boundaries)
 
     p = sub.add_parser("table", help="the benchmark's tables in one resumable command: collect, "
                        "train every policy and ablation, evaluate, report")

@@ -23,6 +23,9 @@ from rmbench.video import probe_video
 REQUIRED_INFO = ("codebase_version", "robot_type", "total_episodes", "total_frames",
                  "total_tasks", "chunks_size", "data_files_size_in_mb", "video_files_size_in_mb",
                  "fps", "splits", "data_path", "video_path", "features")
+# the frame columns every dataset has (the environment state is optional, cameras too)
+REQUIRED_FEATURES = (L.STATE, L.EE_POSE, L.ACTION, L.SUBTASK_INDEX, L.SUBTASK_END,
+                     L.SUBTASK_STEP, L.PROGRESS, *L.INDEX_COLUMNS)
 # info.json fields LeRobot reads and the reader does not (check_info types the others)
 INFO_TYPES = {"robot_type": str, "chunks_size": int, "data_files_size_in_mb": int,
               "video_files_size_in_mb": int, "splits": dict, "data_path": str, "video_path": str}
@@ -62,6 +65,9 @@ def _check(root) -> dict:
               f"{L.CHUNKS_SIZE}")
     if len(ds.instructions) != info["total_tasks"]:
         _fail(f"{root / L.TASKS}: {len(ds.instructions)} tasks, info.json says {info['total_tasks']}")
+    for key in REQUIRED_FEATURES:
+        if key not in info["features"]:
+            _fail(f"{root / L.INFO}: no feature {key!r}")
     stats = read_json(root / L.STATS)
     if not isinstance(stats, dict):
         _fail(f"{root / L.STATS}: not a JSON object")
@@ -176,9 +182,14 @@ def _check_data(path, features, e, n, first, ds) -> tuple[np.ndarray, np.ndarray
     sub = column(table, L.SUBTASK_INDEX)
     if not np.isin(sub, np.arange(len(ds.subtasks))).all():
         _fail(f"{path}: subtask_index outside the {len(ds.subtasks)} subtasks of {L.SUBTASKS}")
+    step = column(table, L.SUBTASK_STEP)
+    if n and (step[0] != 0 or (np.diff(step) < 0).any()):
+        _fail(f"{path}: subtask_step does not count the plan's steps up from 0")
+    if ((np.diff(sub) != 0) & (np.diff(step) == 0)).any():
+        _fail(f"{path}: subtask_index changes within a plan step (a step names one subtask)")
     ends = column(table, L.SUBTASK_END).astype(bool)
-    if not np.array_equal(ends, subtask_ends(sub)):
-        _fail(f"{path}: subtask_end flags do not mark the last frame of each subtask")
+    if not np.array_equal(ends, subtask_ends(step)):
+        _fail(f"{path}: subtask_end flags do not mark the last frame of each plan step")
     return ends, sub
 
 

@@ -17,7 +17,9 @@ from rmbench.sim.simulator import ACTION_DIM, EE_POSE_DIM
 from rmbench.video import VideoCodec
 
 CODEBASE_VERSION = "v3.0"
-FORMAT = "rmbench/1"  # rmbench's own metadata (meta/rmbench.json)
+# rmbench's own metadata (meta/rmbench.json). rmbench/2: one subtask per plan step
+# (``subtask_step``), so a step repeated back to back (press_button's pushes) has its own end.
+FORMAT = "rmbench/2"
 ROBOT_TYPE = "aloha"  # two ViperX 300s arms, the gym-aloha layout
 CHUNKS_SIZE = 1000
 
@@ -40,6 +42,9 @@ ACTION = "action"
 IMAGE_PREFIX = "observation.images."
 SUBTASK_INDEX = "subtask_index"
 SUBTASK_END = "subtask_end"
+# Which step of the task's plan a frame works on (0 .. len(plan) - 1): the number of plan steps
+# the simulator counts as done at that frame. A subtask ends where its step does.
+SUBTASK_STEP = "subtask_step"
 PROGRESS = "progress"
 INDEX_COLUMNS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
 
@@ -111,6 +116,7 @@ class Spec:
         feats[ACTION] = {"dtype": "float32", "shape": [ACTION_DIM], "names": JOINT_NAMES}
         feats[SUBTASK_INDEX] = {"dtype": "int64", "shape": [1], "names": None}
         feats[SUBTASK_END] = {"dtype": "bool", "shape": [1], "names": None}
+        feats[SUBTASK_STEP] = {"dtype": "int64", "shape": [1], "names": None}
         feats[PROGRESS] = {"dtype": "float32", "shape": [1], "names": None}
         feats["timestamp"] = {"dtype": "float32", "shape": [1], "names": None}
         for col in INDEX_COLUMNS[1:]:

@@ -188,7 +188,8 @@ class Copier:
             ep.task, ep.seed, True, "success", ep.instruction, copy.hidden, copy.state,
             ee[k].astype(np.float32), copy.action, ep.subtask_index, ep.progress,
             {c: enc[k][c].finish() for c in cams}, {c: s.result() for c, s in stats[k].items()},
-            environment_state=copy.environment_state) for k, copy in copies.items()]
+            environment_state=copy.environment_state, subtask_step=ep.subtask_step)
+            for k, copy in copies.items()]
 
 
 # One Copier per worker process, built on first use (the env takes a while to compile).

@@ -57,6 +57,14 @@ class Episode:
     # (T, len(state_names)) float32, the task's state observation; None in a dataset collected
     # before the column existed
     environment_state: np.ndarray | None = None
+    # (T,) int64, the plan step of each frame (layout.SUBTASK_STEP); a subtask ends where its
+    # step does. Derived from the end flags where not given.
+    subtask_step: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.subtask_step is None:
+            ends = np.asarray(self.subtask_end, bool)
+            self.subtask_step = np.concatenate([[0], np.cumsum(ends[:-1])]).astype(np.int64)
 
     def __len__(self) -> int:
         return len(self.action)
@@ -162,6 +170,10 @@ class Dataset:
         self.rmbench = read_json(self.root / L.RMBENCH)
         if not isinstance(self.rmbench, dict) or not isinstance(self.rmbench.get("task"), str):
             raise DatasetError(f"{self.root / L.RMBENCH}: no task name")
+        if self.rmbench.get("format") != L.FORMAT:
+            raise DatasetError(
+                f"{self.root / L.RMBENCH}: dataset format {self.rmbench.get('format')!r}, this rmbench "
+                f"reads {L.FORMAT!r} (one subtask per plan step): collect it again with rmbench collect")
         self.features: dict[str, dict] = self.info["features"]
         self.fps: int = self.info["fps"]
         self.cameras = [k[len(L.IMAGE_PREFIX):] for k, f in self.features.items()
@@ -242,7 +254,8 @@ class Dataset:
             progress=column(table, L.PROGRESS), timestamp=column(table, "timestamp"),
             key_frames=list(row["rmbench/key_frames"]), subtasks=self.subtasks,
             environment_state=(column(table, L.ENV_STATE) if L.ENV_STATE in table.column_names
-                               else None))
+                               else None),
+            subtask_step=column(table, L.SUBTASK_STEP))
         for cam in cameras:
             path = self.video_path(cam, index)
             if not path.exists():

@@ -48,6 +48,9 @@ class Trajectory:
     environment_state: list[np.ndarray] = field(default_factory=list)  # Task.environment_state
     action: list[np.ndarray] = field(default_factory=list)
     executed: list[np.ndarray] = field(default_factory=list)  # action + noise, as applied
+    # The plan step each frame works on (the simulator's count of finished steps) and that
+    # step's subtask: the task's ground truth, so an end falls where the step is done.
+    step: list[int] = field(default_factory=list)
     subtask: list[int] = field(default_factory=list)
     progress: list[float] = field(default_factory=list)
     success: bool = False
@@ -76,6 +79,7 @@ class EpisodeRecord:
     image_stats: dict[str, dict] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     environment_state: np.ndarray | None = None  # (T, len(Task.state_names)) float32
+    subtask_step: np.ndarray | None = None  # (T,) int64, the plan step (layout.SUBTASK_STEP)
 
     @property
     def length(self) -> int:
@@ -160,7 +164,8 @@ class Recorder:
             np.asarray(traj.action, np.float32), np.asarray(traj.subtask, np.int64),
             np.asarray(traj.progress, np.float32), videos,
             {c: s.result() for c, s in stats.items()}, timings,
-            environment_state=np.asarray(traj.environment_state, np.float32))
+            environment_state=np.asarray(traj.environment_state, np.float32),
+            subtask_step=np.asarray(traj.step, np.int64))
 
     def _replay(self, seed: int, traj: Trajectory):
         env, _ = self._env(render=True)
@@ -210,6 +215,7 @@ def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = 
     perturb = perturber(noise, seed, env)
     traj = Trajectory(info["instruction"], info["hidden"])
     progress = info["progress"]
+    plan, step = info["plan"], info["subtask_step"]
     while True:
         try:
             action = np.asarray(expert.act(obs), np.float32).astype(np.float64)
@@ -225,7 +231,8 @@ def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = 
         traj.environment_state.append(env.unwrapped.task.environment_state())
         traj.action.append(action)
         traj.executed.append(executed)
-        traj.subtask.append(expert.subtask_index)
+        traj.step.append(min(step, len(plan) - 1))
+        traj.subtask.append(plan[traj.step[-1]])
         traj.progress.append(progress)
         if encoders is not None:
             for cam, enc in encoders.items():
@@ -233,6 +240,7 @@ def run_expert(env, expert, seed: int, encoders: dict[str, Mp4Encoder] | None = 
                 stats[cam].add(obs["pixels"][cam])
         obs, _, terminated, truncated, info = env.step(executed)
         progress = info.get("progress", progress)
+        step = info.get("subtask_step", step)
         if terminated or truncated:
             traj.success = bool(info.get("is_success"))
             traj.reason = ("success" if traj.success else info.get("failure_reason")

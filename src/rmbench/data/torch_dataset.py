@@ -88,7 +88,7 @@ class DemoDataset(torch.utils.data.Dataset):
     An item holds ``observation.state`` (14,) float32, ``observation.images.<camera>`` (3, H, W)
     uint8, ``action`` (chunk, 14) float32 with ``action_is_pad`` (chunk,) where the chunk runs
     past the episode's end (padded with its last action), and ``subtask_index``,
-    ``subtask_end``, ``task_index``, ``episode_index``, ``frame_index``, ``episode_start``.
+    ``subtask_end``, ``subtask_step``, ``task_index``, ``episode_index``, ``frame_index``, ``episode_start``.
 
     With ``history`` n > 1 the state and images are the last n frames, oldest first: state
     (n, 14) and images (n, 3, H, W), the episode's first frame repeated before its start (an
@@ -162,6 +162,7 @@ class DemoDataset(torch.utils.data.Dataset):
             "action_is_pad": torch.from_numpy(np.arange(t, t + self.chunk) >= n),
             L.SUBTASK_INDEX: torch.tensor(int(ep.subtask_index[t])),
             L.SUBTASK_END: torch.tensor(bool(ep.subtask_end[t])),
+            L.SUBTASK_STEP: torch.tensor(int(ep.subtask_step[t])),
             "task_index": torch.tensor(self.task_index[k]),
             "episode_index": torch.tensor(ep.index),
             "frame_index": torch.tensor(t),

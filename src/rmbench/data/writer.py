@@ -56,9 +56,10 @@ def vector_column(x: np.ndarray) -> pa.Array:
     return pa.FixedSizeListArray.from_arrays(pa.array(x.reshape(-1)), x.shape[1])
 
 
-def subtask_ends(subtask_index: np.ndarray) -> np.ndarray:
-    """True on the last frame of each run of one subtask label, and on the episode's last."""
-    s = np.asarray(subtask_index)
+def subtask_ends(subtask_step: np.ndarray) -> np.ndarray:
+    """True on the last frame of each plan step, and on the episode's last. Steps, not subtask
+    labels: two pushes of one button are two subtasks with one text."""
+    s = np.asarray(subtask_step)
     end = np.zeros(len(s), bool)
     end[:-1] = s[:-1] != s[1:]
     end[-1] = True
@@ -78,7 +79,8 @@ def frame_table(rec: EpisodeRecord, episode_index: int, first_index: int,
         L.EE_POSE: vector_column(rec.ee_pose),
         L.ACTION: vector_column(rec.action),
         L.SUBTASK_INDEX: pa.array(rec.subtask_index.astype(np.int64)),
-        L.SUBTASK_END: pa.array(subtask_ends(rec.subtask_index)),
+        L.SUBTASK_END: pa.array(subtask_ends(rec.subtask_step)),
+        L.SUBTASK_STEP: pa.array(rec.subtask_step.astype(np.int64)),
         L.PROGRESS: pa.array(rec.progress.astype(np.float32)),
         "timestamp": pa.array((frames / fps).astype(np.float32)),
         "frame_index": pa.array(frames),
@@ -161,7 +163,7 @@ class DatasetWriter:
         write_parquet(self.root / L.data_file(e), table)
 
         chunk, file = L.chunk_file(e)
-        ends = subtask_ends(rec.subtask_index)
+        ends = subtask_ends(rec.subtask_step)
         row: dict[str, Any] = {
             "episode_index": e, "tasks": [rec.instruction], "length": rec.length,
             "data/chunk_index": chunk, "data/file_index": file,

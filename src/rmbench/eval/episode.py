@@ -49,7 +49,8 @@ def run_policy_episode(env, policy, seed: int, video: bool = False,
     best, steps, reason, message, success = float(info["progress"]), 0, "timeout", "", False
     queue: list[np.ndarray] = []
     events = Events()
-    events.update(0, "task", {"subtask": info["subtask"], **info["predicates"]})
+    events.update(0, "task", {"subtask": info["subtask"], "subtask_step": info["subtask_step"],
+                              **info["predicates"]})
     status = getattr(policy, "status", dict)
     try:
         policy.reset(info["instruction"], task_info)
@@ -69,6 +70,7 @@ def run_policy_episode(env, policy, seed: int, video: bool = False,
         if on_step:
             on_step(steps, info)
         events.update(steps, "task", {"subtask": info.get("subtask", ""),
+                                      "subtask_step": info.get("subtask_step", 0),
                                       **info.get("predicates", {})})
         best = max(best, float(info["progress"]))
         if encoder:

@@ -29,8 +29,8 @@ class CoverBlocksExpert(ScriptedExpert):
             cube = task.cubes[k]
             cover_on[k] = k
             yield from self.label(k, carry(task.covers[k], cube.pos(data)[:2]))
-        for s, colour in enumerate(COLOURS):
+        for colour in COLOURS:
             k = task.colours.index(colour)
             behind = task.cubes[k].pos(data)[:2] + np.array([0.0, BEHIND])
-            yield from self.label(3 + s, carry(task.covers[cover_on[k]], behind))
-        yield from self.label(5, m.retreat())
+            yield from self.label(3 + k, carry(task.covers[cover_on[k]], behind))
+        yield from self.label(3 + k, m.retreat())

@@ -47,11 +47,14 @@ HIDDEN_RIM = 0.04
 @register
 class CoverBlocks(Task):
     name = "cover_blocks"
-    gym_id = "rmbench/CoverBlocks-v1"
+    gym_id = "rmbench/CoverBlocks-v2"
     tmc = "M(n)"
     step_limit = 1500
+    # Subtasks name the cover to move by where it stands, as a plan step is carried out: the
+    # colour under each cover is what memory must recover, so it is the planner's to resolve
+    # (from o_0 and the key memory), not hidden in the text the executor reads.
     subtasks = ("cover the left block", "cover the middle block", "cover the right block",
-                "uncover the red block", "uncover the green block", "uncover the blue block")
+                "uncover the left block", "uncover the middle block", "uncover the right block")
     instructions_seen = (
         "Cover the three blocks from left to right, then uncover them in the order red, green, "
         "blue.",
@@ -124,7 +127,7 @@ class CoverBlocks(Task):
         return states
 
     def plan(self) -> list[int]:
-        return [0, 1, 2, 3, 4, 5]
+        return [0, 1, 2, *(3 + self.colours.index(colour) for colour in COLOURS)]
 
     def hidden_by_cover(self, cube: Cube) -> bool:
         """Whether a cover hides the cube from the head camera: one stands over it, its rim

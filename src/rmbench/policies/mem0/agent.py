@@ -95,6 +95,7 @@ class Mem0Policy(BasePolicy):
         self.memory = MemoryStore(1, cfg.step_tokens, cfg.sliding_window, cfg.dim)
         self.debounce = Debounce(cfg.end_window)
         self.t = 0
+        self.subtask_t = 0  # steps since the subtask began: the sliding window's phase
         self.queue: list[np.ndarray] = []
         self.ensemble = TemporalEnsemble(cfg.horizon, cfg.temporal_ensemble)
         self.next_chunk_at = 0  # with temporal ensembling: the step the next chunk is due
@@ -103,6 +104,7 @@ class Mem0Policy(BasePolicy):
         self.subtask = self.goal
         self.start_subtask = True
         self.stage = 0
+        self.ends = 0  # subtask ends declared this episode (eval/boundaries.py reads them)
 
     @inference
     def act(self, observation: dict[str, Any]) -> np.ndarray:
@@ -112,12 +114,20 @@ class Mem0Policy(BasePolicy):
         if self.t == 0 and self.decompose:
             self.first = self.model.planner.embed(self.planner_inputs(inputs))
             self.subtask = self.plan(self.first)
+        elif self.decompose and cfg.gt_classifier and self.env.subtask_stage > self.stage:
+            # The simulator counts the step done after the action that did it: this frame is
+            # the next step's first, as in the demonstrations' labels.
+            self.stage = self.env.subtask_stage
+            self.subtask_ended(inputs)
         if self.start_subtask:
             self.memory.reset(torch.ones(1, dtype=torch.bool), tokens)
             self.queue, self.start_subtask, self.next_chunk_at = [], False, self.t
+            self.subtask_t = 0
             self.ensemble.reset()  # a new subtask's chunks do not average with the last one's
         c = ex.context(z, self.memory, torch.tensor([self.subtask]))
-        if self.t % cfg.memory_every == 0:
+        # Training walks each subtask from its first frame with this stride and pushes every
+        # frame it visits; the window here is filled on the same phase.
+        if self.subtask_t % cfg.memory_every == 0:
             self.memory.push(z)
         if cfg.temporal_ensemble > 0:
             if self.t >= self.next_chunk_at:
@@ -128,14 +138,16 @@ class Mem0Policy(BasePolicy):
             if not self.queue:
                 self.queue = list(self.chunk(c, observation, cfg.execute))
             action = self.queue.pop(0)
-        if self.decompose and self.ended(c):
+        if self.decompose and not cfg.gt_classifier and self.ended(c):
             self.subtask_ended(inputs)
         self.t += 1
+        self.subtask_t += 1
         return action
 
     def status(self) -> dict[str, Any]:
-        """The subtask the executor is on (an M(n) task's planner choice; the goal on M(1))."""
-        return {"subtask": self.describe["executor_texts"][self.subtask]}
+        """The subtask the executor is on (an M(n) task's planner choice; the goal on M(1))
+        and how many subtask ends it has declared."""
+        return {"subtask": self.describe["executor_texts"][self.subtask], "subtask_ends": self.ends}
 
     # ------------------------------------------------------------------ helpers
     def chunk(self, c: torch.Tensor, observation: dict[str, Any], length: int) -> np.ndarray:
@@ -162,15 +174,13 @@ class Mem0Policy(BasePolicy):
         return inputs if self.planner_cams is None else [inputs[i] for i in self.planner_cams]
 
     def ended(self, c: torch.Tensor) -> bool:
-        if self.cfg.gt_classifier:
-            stage = self.env.subtask_stage
-            ended, self.stage = stage > self.stage, max(stage, self.stage)
-            return ended
+        """The end classifier's debounced verdict on this step."""
         p = torch.sigmoid(self.model.executor.end_logit(c))[0].item()
         return self.debounce.update(p > self.cfg.end_threshold)
 
     def subtask_ended(self, inputs: list[torch.Tensor]) -> None:
         planner = self.model.planner
+        self.ends += 1
         frame = planner.embed(self.planner_inputs(inputs))
         self.keys.append((self.subtask, frame[0]))
         nxt = self.plan(frame if not self.cfg.use_key else self.first)

@@ -26,10 +26,10 @@ class Debounce:
         return False
 
 
-def end_labels(subtask_index: np.ndarray, window: int) -> np.ndarray:
-    """(T,) bool: frame t is within the last ``window`` frames of its run of one subtask."""
-    n = len(subtask_index)
+def end_labels(subtask_step: np.ndarray, window: int) -> np.ndarray:
+    """(T,) bool: frame t is within the last ``window`` frames of its plan step."""
+    n = len(subtask_step)
     to_end = np.zeros(n, dtype=np.int64)
     for t in range(n - 2, -1, -1):
-        to_end[t] = to_end[t + 1] + 1 if subtask_index[t] == subtask_index[t + 1] else 0
+        to_end[t] = to_end[t + 1] + 1 if subtask_step[t] == subtask_step[t + 1] else 0
     return to_end < window

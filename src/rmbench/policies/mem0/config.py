@@ -111,6 +111,11 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     end_threshold: float = 0.5
     classifier_weight: float = 1.0
     """Weight of the end classifier's loss beside the action loss."""
+    classifier_trains_encoder: bool = False
+    """Whether the end classifier's loss reaches the encoders and memory fusions through c_t.
+    Off: the classifier reads c_t detached and learns on the features the action loss shapes.
+    Its loss is positive-weighted up to 50x (a subtask's last L frames are few) and, measured
+    early in training on battery_try, its gradient on the encoder was ~12x the action loss's."""
     # --- planner
     planner_backend: str = "small"
     """"small": the CPU planner (planner.py); "vlm": a language model with LoRA over the key

@@ -13,13 +13,18 @@ import torch
 from torch import nn
 
 
-class MemoryStore:
-    def __init__(self, slots: int, cameras: int, window: int, dim: int,
-                 device: torch.device | str = "cpu"):
+class MemoryStore(nn.Module):
+    """Per slot: the anchor tokens (C, d), the sliding window (K, d) and which of its entries
+    are filled. Buffers, so the store follows its owner's ``.to()``; not persistent, since a
+    checkpoint holds weights and the training state saves the store itself (``state()``)."""
+
+    def __init__(self, slots: int, cameras: int, window: int, dim: int):
+        super().__init__()
         self.window = window
-        self.anchor = torch.zeros(slots, cameras, dim, device=device)
-        self.sliding = torch.zeros(slots, window, dim, device=device)
-        self.valid = torch.zeros(slots, window, dtype=torch.bool, device=device)
+        self.register_buffer("anchor", torch.zeros(slots, cameras, dim), persistent=False)
+        self.register_buffer("sliding", torch.zeros(slots, window, dim), persistent=False)
+        self.register_buffer("valid", torch.zeros(slots, window, dtype=torch.bool),
+                             persistent=False)
 
     def reset(self, which: torch.Tensor, tokens: torch.Tensor) -> None:
         """Start a subtask in the slots where ``which`` (B,) is set: the anchor becomes this

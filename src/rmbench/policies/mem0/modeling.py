@@ -68,6 +68,10 @@ class Executor(nn.Module):
         return torch.cat([c, self.state_proj(self.normalizer.state(state))[:, None]], 1)
 
     def end_logit(self, c: torch.Tensor) -> torch.Tensor:
+        """P(the subtask has ended) as a logit (B,), from c_t; read detached unless
+        ``classifier_trains_encoder``, so its loss trains the classifier alone."""
+        if not self.cfg.classifier_trains_encoder:
+            c = c.detach()
         return self.classifier(c.flatten(1))[:, 0]
 
     def backbone_parameters(self) -> list[nn.Parameter]:
@@ -93,7 +97,7 @@ class Mem0Model(nn.Module):
 
 class Mem0Trainer(nn.Module):
     """The executor's training step over episode-ordered batches: one memory slot per batch
-    slot, reset at episode starts and (for M(n) tasks) at subtask changes."""
+    slot, reset at episode starts and (for M(n) tasks) where the plan's step changes."""
 
     def __init__(self, model: Mem0Model, batch_size: int, decompose: bool, seed: int,
                  state_names: list[str] | tuple[str, ...] = ()):
@@ -106,20 +110,13 @@ class Mem0Trainer(nn.Module):
                                                  state_names)
         self.joint_scale = joint_noise_scale(cfg)
         self.memory = MemoryStore(batch_size, cfg.step_tokens, cfg.sliding_window, cfg.dim)
-        self.last_subtask = torch.full((batch_size,), -1, dtype=torch.long)
+        self.register_buffer("last_step", torch.full((batch_size,), -1, dtype=torch.long),
+                             persistent=False)
         self.generator = torch.Generator().manual_seed(seed)
         for p in model.planner.parameters():
             p.requires_grad_(False)
         # built after the planner is fitted: its weights are copied as they are and stay
         self.ema = EMA(model, cfg.ema_power, cfg.ema_max_decay) if cfg.ema else None
-
-    def to(self, *args, **kwargs):  # the memory store follows the model's device
-        super().to(*args, **kwargs)
-        device = next(self.model.parameters()).device
-        m = self.memory
-        m.anchor, m.sliding, m.valid = m.anchor.to(device), m.sliding.to(device), m.valid.to(device)
-        self.last_subtask = self.last_subtask.to(device)
-        return self
 
     def param_groups(self) -> list[dict]:
         ex, cfg = self.model.executor, self.model.cfg
@@ -140,12 +137,12 @@ class Mem0Trainer(nn.Module):
         if self.memory_scale is not None:
             blurred = add_state_noise(inputs[0], self.memory_scale, self.generator)
             memory_tokens, memory_z = ex.encode([blurred, *inputs[1:]])
-        subtask = batch[L.SUBTASK_INDEX]
+        step = batch[L.SUBTASK_STEP]
         reset = batch["episode_start"].bool()
         if self.decompose:
-            reset = reset | (subtask != self.last_subtask)
+            reset = reset | (step != self.last_step)
         self.memory.reset(reset, memory_tokens)
-        self.last_subtask = subtask.clone()
+        self.last_step.copy_(step)
         c = ex.context(z, self.memory, batch["text_index"])
         self.memory.push(memory_z)
         target = ex.normalizer.action(batch[L.ACTION], batch[L.STATE])
@@ -163,12 +160,12 @@ class Mem0Trainer(nn.Module):
         return loss, logs
 
     def extra_state(self) -> dict:
-        return {"memory": self.memory.state(), "last_subtask": self.last_subtask,
+        return {"memory": self.memory.state(), "last_step": self.last_step,
                 "generator": self.generator.get_state()}
 
     def load_extra_state(self, state: dict) -> None:
         self.memory.load_state(state["memory"])
-        self.last_subtask.copy_(state["last_subtask"])
+        self.last_step.copy_(state["last_step"])
         self.generator.set_state(state["generator"].cpu())
 
     def after_step(self) -> None:

@@ -81,15 +81,17 @@ class PlannerExample:
     target: int
 
 
-def runs(subtask_index: np.ndarray) -> list[tuple[int, int]]:
-    """Runs of one subtask as (subtask index, last frame)."""
-    ends = np.flatnonzero(np.diff(subtask_index) != 0).tolist() + [len(subtask_index) - 1]
+def runs(subtask_index: np.ndarray, subtask_step: np.ndarray) -> list[tuple[int, int]]:
+    """The plan's steps as (subtask index, last frame): one entry per step, so two pushes of
+    one button are two keys the planner can count."""
+    ends = np.flatnonzero(np.diff(subtask_step) != 0).tolist() + [len(subtask_step) - 1]
     return [(int(subtask_index[e]), int(e)) for e in ends]
 
 
-def planner_examples(episode: int, subtask_index: np.ndarray, done_index: int) -> list[PlannerExample]:
+def planner_examples(episode: int, subtask_index: np.ndarray, subtask_step: np.ndarray,
+                     done_index: int) -> list[PlannerExample]:
     """Every decision of one demonstration: the first subtask, each next one, then done."""
-    rs = runs(subtask_index)
+    rs = runs(subtask_index, subtask_step)
     out = []
     for k in range(len(rs) + 1):
         keys = tuple(rs[:k])

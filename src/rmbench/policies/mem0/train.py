@@ -56,11 +56,11 @@ class Mem0Frames(DemoDataset):
                          environment_state=cfg.reads_state, **kw)
         self.decompose, self.goal_index = decompose, goal_index
         self.end_window = cfg.end_window
-        self.labels = [end_labels(ep.subtask_index, cfg.end_window) for ep in self.low_dim]
+        self.labels = [end_labels(ep.subtask_step, cfg.end_window) for ep in self.low_dim]
 
     def add_episodes(self, episodes: list) -> None:
         super().add_episodes(episodes)
-        self.labels += [end_labels(ep.subtask_index, self.end_window) for ep in episodes]
+        self.labels += [end_labels(ep.subtask_step, self.end_window) for ep in episodes]
 
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
         item = super().__getitem__(i)
@@ -158,8 +158,9 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
     """Train the planner on every decision of every demonstration (a few hundred): first
     subtask, each next one, then done (candidate index ``done``)."""
     planner = model.planner
-    examples = [x for e in range(ds.num_episodes)
-                for x in planner_examples(e, ds.episode(e, cameras=[]).subtask_index, done)]
+    episodes = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
+    examples = [x for e, ep in enumerate(episodes)
+                for x in planner_examples(e, ep.subtask_index, ep.subtask_step, done)]
     frames = planner_frames(ds, cfg)
     gen = torch.Generator().manual_seed(train_cfg.seed)
     device = torch.device("cuda" if train_cfg.device.startswith("cuda") else "cpu")
