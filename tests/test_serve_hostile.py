@@ -188,6 +188,8 @@ def test_a_thousand_hostile_messages_leave_the_server_serving(camera_server):
         good.send(pack(obs))
         np.testing.assert_array_equal(unpack(good.recv(timeout=5))["actions"], expected(obs)[None])
 
+    good.send(pack({"reset": True, "instruction": "", "task_info": {"seed": 0}}))
+    assert unpack(good.recv(timeout=5)) == {"ok": True}
     good_exchange()  # everything the answers need is built before memory is measured
     hostile = stack.enter_context(connect(url, max_size=None))
     hostile.recv(timeout=10)
@@ -253,6 +255,10 @@ def test_connections_beyond_the_cap_are_refused_and_others_served():
             with connect(url) as second:
                 assert "server busy" in unpack(second.recv(timeout=10))["error"]
             first.send(pack({"agent_pos": np.zeros(14)}))
+            assert "send a reset before" in unpack(first.recv(timeout=10))["error"]
+            first.send(pack({"reset": True, "task_info": {"seed": 3}}))
+            assert unpack(first.recv(timeout=10)) == {"ok": True}
+            first.send(pack({"agent_pos": np.zeros(14)}))
             assert unpack(first.recv(timeout=10))["actions"].shape == (1, 14)
         with connect(url) as third:  # the slot is free again
             assert unpack(third.recv(timeout=10))["server"] == "rmbench"
@@ -293,3 +299,24 @@ def test_policies_reading_the_simulator_are_refused_with_a_reason():
             PolicyServer(spec, TASK)
     with pytest.raises(ValueError, match="itself a remote policy"):
         PolicyServer("remote:ws://127.0.0.1:1", TASK)
+
+
+def test_connections_share_the_loaded_policy_not_its_episodes(dataset):
+    """replay: one dataset loaded for all; each connection replays the seed it reset to."""
+    from rmbench.data.reader import Dataset
+
+    ds = Dataset(dataset)
+    s = PolicyServer(f"replay:{dataset}", TASK, port=0).start()
+    try:
+        url = f"ws://127.0.0.1:{s.port}"
+        with connect(url) as a, connect(url) as b:
+            a.recv(timeout=10), b.recv(timeout=10)
+            for ws, seed in ((a, 0), (b, 2)):
+                ws.send(pack({"reset": True, "task_info": {"seed": seed}}))
+                assert unpack(ws.recv(timeout=10)) == {"ok": True}
+            for ws, episode in ((b, 2), (a, 0)):
+                ws.send(pack({"agent_pos": np.zeros(14)}))
+                np.testing.assert_array_equal(unpack(ws.recv(timeout=10))["actions"],
+                                              ds.episode(episode, cameras=[]).action)
+    finally:
+        s.stop()

@@ -19,6 +19,7 @@ from __future__ import annotations
 import copy
 import logging
 import threading
+from dataclasses import dataclass
 from typing import Any
 
 from websockets.exceptions import ConnectionClosed
@@ -37,11 +38,18 @@ MAX_QUEUE = 2  # messages read ahead per connection; a client waits for each rep
 
 def fork(policy):
     """A policy with its own episode state around ``policy``'s loaded model: the policy's
-    ``fork()`` if it has one, else a shallow copy (the built-in and learned policies rebind
-    all their episode state in ``reset``, which the server calls before every episode)."""
-    forked = policy.fork() if hasattr(policy, "fork") else copy.copy(policy)
-    forked.reset("", {})
-    return forked
+    ``fork()`` if it has one, else a shallow copy. The built-in and learned policies rebind
+    all their episode state in ``reset``, and a connection is served observations only after
+    its first reset, so no episode state is ever shared."""
+    return policy.fork() if hasattr(policy, "fork") else copy.copy(policy)
+
+
+@dataclass
+class Episode:
+    """A connection's policy and whether a reset has started its episode."""
+
+    policy: Any
+    started: bool = False
 
 
 class PolicyServer:
@@ -91,7 +99,7 @@ class PolicyServer:
             ws.close(1013, "server busy")
             return
         try:
-            policy = fork(self.policy)
+            episode = Episode(fork(self.policy))
             ws.send(pack(self.metadata()))
             while True:
                 try:
@@ -99,14 +107,14 @@ class PolicyServer:
                 except TimeoutError:
                     ws.close(1000, f"idle for {self.idle_timeout:g} s")
                     return
-                ws.send(pack(self.respond(policy, message)))
+                ws.send(pack(self.respond(episode, message)))
         except ConnectionClosed:
             pass
         finally:
             with self._count:
                 self._connections -= 1
 
-    def respond(self, policy, message) -> dict[str, Any]:
+    def respond(self, episode: Episode, message) -> dict[str, Any]:
         try:
             msg = unpack(message, self.contract.limits)
             if not isinstance(msg, dict):
@@ -115,12 +123,16 @@ class PolicyServer:
                 if msg.pop("reset") is not True:
                     raise WireError("reset must be true")
                 instruction, info = self.contract.check_reset(msg)
+                episode.started = False  # until this reset has rebound the episode state
                 with self._infer:
-                    policy.reset(instruction, info)
+                    episode.policy.reset(instruction, info)
+                episode.started = True
                 return {"ok": True}
             obs = self.contract.check_observation(msg)
+            if not episode.started:
+                raise WireError("send a reset before the episode's first observation")
             with self._infer:
-                return {"actions": as_chunk(policy.act(obs))}
+                return {"actions": as_chunk(episode.policy.act(obs))}
         except WireError as err:
             return {"error": f"bad message: {err}"}
         except Exception as err:
