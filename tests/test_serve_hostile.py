@@ -320,3 +320,15 @@ def test_connections_share_the_loaded_policy_not_its_episodes(dataset):
                                               ds.episode(episode, cameras=[]).action)
     finally:
         s.stop()
+
+
+def test_serve_cli_refuses_bad_flags_in_one_line(capsys):
+    from rmbench.cli.main import main
+
+    assert main(["serve", "--policy", "expert", "--task", TASK]) == 2
+    assert "reads the simulator" in capsys.readouterr().err
+    assert main(["serve", "--policy", "random", "--task", TASK, "--max-connections", "0"]) == 2
+    assert "max_connections must be >= 1" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["serve", "--policy", "random", "--task", TASK, "--frame-max", "640"])
+    assert "expected HEIGHTxWIDTH" in capsys.readouterr().err
