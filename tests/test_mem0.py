@@ -337,8 +337,9 @@ def test_vlm_planner_backend_trains_with_lora(mn_dataset, tmp_path):
     # above what no learning reaches: the best constant answer's accuracy on these decisions,
     # and the loss of a uniform guess over the candidates
     ds = Dataset(mn_dataset)
-    targets = [x.target for e in range(ds.num_episodes)
-               for x in planner_examples(e, ds.episode(e, cameras=[]).subtask_index, -1)]
+    episodes = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
+    targets = [x.target for e, ep in enumerate(episodes)
+               for x in planner_examples(e, ep.subtask_index, ep.subtask_step, -1)]
     constant = max(targets.count(t) for t in set(targets)) / len(targets)
     candidates = len(json.loads((tmp_path / "v" / "config.json").read_text())["planner_texts"])
     assert report["decisions"] == len(targets)
