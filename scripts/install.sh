@@ -6,7 +6,7 @@
 #  3. install the CPU build of torch first (never a CUDA build), then rmbench with its test,
 #     training, text-encoder and planner-backend extras.
 # Packages come from pip's configured index (pip config, PIP_INDEX_URL, ...). torch alone can
-# come from another: RMBENCH_TORCH_INDEX=URL (README.md, set-up).
+# come from another: RMBENCH_TORCH_INDEX=URL (docs/getting-started.md).
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

@@ -150,9 +150,9 @@ def test_visibility_flags_agree_with_the_head_camera(task_name, seed):
 
 
 def test_docs_list_every_entry_in_order():
-    """docs/state_observation.md: one table per task, its rows' piece and entries spelling
+    """docs/reference/observations.md: one table per task, its rows' piece and entries spelling
     out ``state_names`` in order."""
-    text = (Path(__file__).parents[1] / "docs" / "state_observation.md").read_text()
+    text = (Path(__file__).parents[1] / "docs" / "reference" / "observations.md").read_text()
     sections = re.split(r"^### ", text, flags=re.M)[1:]
     documented = {}
     for section in sections:

@@ -1,6 +1,6 @@
 """Demonstration datasets in the LeRobot v3.0 layout: collection, writing, reading, checking.
 
-See docs/dataset.md for every file and field.
+See docs/reference/dataset_format.md for every file and field.
 """
 
 from rmbench.data.collect import CollectConfig, CollectSummary, collect

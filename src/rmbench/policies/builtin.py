@@ -1,5 +1,5 @@
 """The built-in policies: the scripted expert (an upper bound, reading privileged state),
-random and no-op floors, and open-loop replay of a dataset's actions (a determinism check)."""
+random and no-op lower references, and open-loop replay of a dataset's actions (a determinism check)."""
 
 from __future__ import annotations
 

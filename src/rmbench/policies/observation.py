@@ -6,7 +6,7 @@ the two observations a learned policy can be trained on.
 - ``"pixels"``: the cameras, each through its own CNN (frames resized as in training: the
   dataset's frame cache uses the same antialiased resize);
 - ``"state"``: ``observation.environment_state`` (the task's vector of what the head camera
-  shows, docs/state_observation.md) with the joint state, through a small MLP
+  shows, docs/reference/observations.md) with the joint state, through a small MLP
   (``nn/state.py``); no frame is decoded in training, nothing is rendered in evaluation;
 - ``"auto"`` (the default): chosen by ``rmbench train`` from the dataset (``choose``):
   ``"pixels"`` when it has camera videos, ``"state"`` when it has none. State from a dataset

@@ -1,6 +1,6 @@
 """``rmbench serve``: a policy behind a websocket.
 
-Protocol (docs/policy_server.md): on connect the server sends its greeting, which says what
+Protocol (docs/guides/policy_server.md): on connect the server sends its greeting, which says what
 the policy reads (``contract.py``); then each client message is a msgpack map.
 ``{"reset": true, "instruction": str, "task_info": {...}}`` starts an episode and is answered
 ``{"ok": true}``; any other map is an observation, answered ``{"actions": (k, 14) float64}``.

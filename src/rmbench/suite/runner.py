@@ -7,7 +7,7 @@ threads (a collect or evaluation job: as many worker processes) and its own log 
 ``OUT/logs``; on Ray each is a task with one CPU, and ``OUT`` must be a file system every
 node sees (the stages read and write their folders there). A
 job that fails is reported with its log and its dependants are skipped; the others go on.
-Interrupted (Ctrl-C, a killed session), the running jobs stop and what they saved stays:
+Interrupted (Ctrl-C, a killed terminal), the running jobs stop and what they saved stays:
 a re-run of the same command plans only what is missing.
 """
 

@@ -65,7 +65,7 @@ class Task:
     # n): the n-th expert segment start after the env reached that stage (rmbench.aliasing).
     aliasing_pair: ClassVar[tuple[tuple[dict, int, int], tuple[dict, int, int]]]
     # The state observation: names of ``environment_state()``'s entries, in order (see
-    # rmbench.tasks.state for the shared encodings and docs/state_observation.md).
+    # rmbench.tasks.state for the shared encodings and docs/reference/observations.md).
     state_names: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self):

@@ -57,7 +57,7 @@ class PutBackBlock(Task):
     hidden_keys = ("original_mat",)
     aliasing_pair = (({"original_mat": "left"}, 2, 1), ({"original_mat": "front"}, 2, 1))
 
-    # The state observation (docs/state_observation.md): the four mats, the button, the cube.
+    # The state observation (docs/reference/observations.md): the four mats, the button, the cube.
     state_names = (*(n for m in MAT_NAMES for n in S.xy_names(f"mat_{m}")),
                    *S.button_names("button"), *S.pose_names("cube", S.CUBE_SYMMETRY))
 

@@ -18,7 +18,7 @@ disagrees with the state) writes it again from the state. Under torchrun each ra
 its own episode stream and rank 0 writes.
 
 The state also counts the wall time of the steps it holds, over every piece that saved them
-and the machines they ran on: a training spread over sessions (each killed at its end, then
+and the machines they ran on: a training spread over several runs (each killed, then
 resumed) keeps the time of all its saved steps, and loses with a killed piece only the time
 of the steps it had not saved, which it loses too.
 """
@@ -97,7 +97,7 @@ class TrainConfig:
 
 
 # Where a run trains is not part of what it is: a run started on a GPU resumes on a CPU (or
-# another GPU), and one started on a lent machine resumes at home, where the same dataset lives
+# another GPU), and one started on another machine resumes on this one, where the same dataset lives
 # in another folder; it draws the batches it would have drawn. The dataset's episodes and
 # frames stay part of it.
 PLACE_FIELDS = ("device",)

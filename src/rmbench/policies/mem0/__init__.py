@@ -1,4 +1,4 @@
-"""Mem-0: the benchmark's modular memory policy (../docs/mem0.md).
+"""Mem-0: the benchmark's modular memory policy (docs/guides/train_mem0.md).
 
 config.py      Mem0Config: every setting, with the ablation flags
 memory.py      the anchor + sliding memory store and its residual cross-attention fusion

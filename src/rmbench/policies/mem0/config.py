@@ -84,8 +84,8 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     relative_actions: bool = True
     """Joint targets as offsets from the current joint positions, grippers absolute (as openpi
     does for ALOHA): holding still is the zero prediction. False: absolute targets. From the
-    state observation on put_back_block absolute targets doubled success (41 against 21 of
-    100, docs/results/learning.md): a grasp pose is a function of the cube's pose alone, an
+    state observation on put_back_block absolute targets did better once trained long enough
+    (docs/history.md): a grasp pose is a function of the cube's pose alone, an
     offset to it changes at every step of the approach."""
     action_space: str = "joints"
     """What the action head predicts: "joints", the env's 14 joint targets, or "ee", each

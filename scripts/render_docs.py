@@ -1,0 +1,471 @@
+"""The tables of README.md and docs/, rendered from the JSON under benchmarks/results/.
+
+A doc holds a generated table between two markers:
+
+    <!-- table:NAME -->
+    ...
+    <!-- /table -->
+
+and this script rewrites what lies between them from ``TABLES[NAME]``; no number in such a
+table is typed by hand. Success rates carry their Wilson 95% interval (``eval/intervals.py``).
+
+    .venv/bin/python scripts/render_docs.py          # rewrite every table
+    .venv/bin/python scripts/render_docs.py --check  # list the tables that differ; exit 1 if any
+
+``tests/test_docs.py`` runs the check, so a committed doc cannot drift from its JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from rmbench.eval.chance import chance
+from rmbench.eval.intervals import format_rate
+from rmbench.eval.report import PUBLISHED
+from rmbench.suite.plan import applies
+from rmbench.suite.tables import PUBLISHED_ABLATIONS
+from rmbench.tasks.registry import ordered
+from rmbench.video import write_atomic
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+MARKER = re.compile(r"(<!-- table:([\w-]+) -->\n)(.*?)(<!-- /table -->)", re.S)
+
+COLUMN = {"mem0": "Mem-0", "mem0:no_memory": "`no_memory`", "mem0:no_anchor": "`no_anchor`",
+          "mem0:no_sliding": "`no_sliding`", "mem0:no_key": "`no_key`",
+          "mem0:gt_classifier": "`gt_classifier`", "dp": "DP", "act": "ACT"}
+
+
+def load(name: str) -> dict:
+    return json.loads((RESULTS / name).read_text())
+
+
+def rate(cell: dict | None) -> str:
+    """'85 [77, 91]': successes in percent with the Wilson 95% interval; '—' if not measured."""
+    if cell is None:
+        return "—"
+    k = cell["successes"] if "successes" in cell else round(cell["success_rate"] * cell["episodes"])
+    return format_rate(k, cell["episodes"])
+
+
+def minutes(seconds: float | None) -> str:
+    return "—" if seconds is None else f"{seconds / 60:.1f} min"
+
+
+def markdown(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(v) for v in r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------ the tasks
+def tasks() -> str:
+    """The nine tasks as the registry defines them, each with its chance level without memory."""
+    rows = [[t.name, f"`{t.gym_id}`", t.tmc, t.step_limit, t.aliasing_point,
+             f"{100 * chance(t.name).rate:.1f}%"] for t in ordered()]
+    return markdown(["task", "gym id", "TMC", "step limit", "where only memory tells", "chance"], rows)
+
+
+# ------------------------------------------------------------------ the state table
+def _state_rows(res: dict, specs: list[str], extra: Callable[[str], list] = lambda t: [],
+                extra_avg: Callable[[str], list] = lambda g: []) -> list[list[str]]:
+    """One row per task (M(1), then M(n)) and the three averages: each measured cell as a rate
+    with its interval, each average as the mean of its column's rates (empty where a column
+    lacks a cell of the group)."""
+    cells, rows, groups = res["cells"], [], {}
+    for task in ordered():
+        if task.name not in cells:
+            continue
+        row = cells[task.name]
+        groups.setdefault(task.tmc, []).append(task.name)
+        rows.append([task.name, task.tmc]
+                    + [rate(row.get(s)) if applies(s, task.tmc) else "n/a" for s in specs]
+                    + extra(task.name))
+        if task.name == [t.name for t in ordered() if t.tmc == task.tmc][-1]:
+            rows.append(_average(res, specs, groups[task.tmc], f"average {task.tmc}", task.tmc)
+                        + extra_avg(task.tmc))
+    everything = [t for names in groups.values() for t in names]
+    rows.append(_average(res, specs, everything, "average (all)", "") + extra_avg(""))
+    return rows
+
+
+def _average(res: dict, specs: list[str], tasks: list[str], name: str, group: str) -> list[str]:
+    out = [f"**{name}**", group]
+    for s in specs:
+        vals = [res["cells"][t].get(s) for t in tasks]
+        if any(v is None for v in vals):
+            out.append("n/a" if not all(applies(s, g) for g in ({group} if group else {"M(1)", "M(n)"}))
+                       else "—")
+        else:
+            out.append(f"{100 * sum(v['success_rate'] for v in vals) / len(vals):.1f}")
+    return out
+
+
+def _chance(res: dict, task: str) -> list[str]:
+    return [f"{100 * res['chance'][task]['rate']:.1f}"]
+
+
+def _chance_avg(res: dict, group: str) -> list[str]:
+    tasks = [t.name for t in ordered() if t.name in res["chance"] and (not group or t.tmc == group)]
+    return [f"{100 * sum(res['chance'][t]['rate'] for t in tasks) / len(tasks):.1f}"]
+
+
+def _published_avg(policy: str, group: str) -> str:
+    tasks = [t.name for t in ordered() if not group or t.tmc == group]
+    return f"{sum(PUBLISHED[policy][t] for t in tasks) / len(tasks):.1f}"
+
+
+def readme_results() -> str:
+    res = load("table_state.json")
+    specs = ["mem0", "mem0:no_memory", "dp", "act"]
+    header = ["task", "TMC", *(COLUMN[s] for s in specs), "chance", "Mem-0 (published)"]
+    rows = _state_rows(res, specs,
+                       lambda t: _chance(res, t) + [f"{PUBLISHED['Mem-0'][t]:g}"],
+                       lambda g: _chance_avg(res, g) + [_published_avg("Mem-0", g)])
+    return markdown(header, rows)
+
+
+def state_policies() -> str:
+    res = load("table_state.json")
+    specs = ["mem0", "mem0:no_memory", "dp", "act"]
+    published = list(PUBLISHED)
+    header = ["task", "TMC", *(COLUMN[s] for s in specs), *(f"{p} (published)" for p in published),
+              "chance"]
+    rows = _state_rows(res, specs,
+                       lambda t: [f"{PUBLISHED[p][t]:g}" for p in published] + _chance(res, t),
+                       lambda g: [_published_avg(p, g) for p in published] + _chance_avg(res, g))
+    return markdown(header, rows)
+
+
+def state_ablations() -> str:
+    res = load("table_state.json")
+    specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
+             "mem0:gt_classifier"]
+    header = ["task", "TMC", *(COLUMN[s] for s in specs), "chance"]
+    rows = _state_rows(res, specs, lambda t: _chance(res, t), lambda g: _chance_avg(res, g))
+    published = "; ".join(f"{g}: " + ", ".join(f"{COLUMN[s]} {v:g}" for s, v in vals.items())
+                          for g, vals in PUBLISHED_ABLATIONS.items())
+    return markdown(header, rows) + f"\nPublished averages (per-task numbers unpublished): {published}.\n"
+
+
+def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
+    rows = []
+    for task in ordered():
+        for spec, c in cells.get(task.name, {}).items():
+            rec = c.get("record", {})
+            progress = f"{c['mean_progress']:.3f}" + (f" ({rec['progress']})" if "progress" in rec else "")
+            endings = ", ".join(f"{k} {v}" for k, v in c["endings"].items() if v)
+            train = rec.get("train_wall") or minutes(c["train_wall_s"])
+            rows.append([task.name, f"`{spec}`", f"{c['successes']}/{c['episodes']}", progress, endings,
+                         rec.get("failures", ""), train, rec.get("eval_wall") or minutes(c["eval_wall_s"])])
+    return rows
+
+
+RECORD_HEADER = ["task", "policy", "success", "progress", "endings", "most frequent failures",
+                 "train wall", "eval wall"]
+
+
+def state_records() -> str:
+    return markdown(RECORD_HEADER, _record_rows(load("table_state.json")["cells"]))
+
+
+def state_superseded() -> str:
+    return markdown(RECORD_HEADER, _record_rows(load("table_state.json")["superseded"]["cells"]))
+
+
+def state_cost() -> str:
+    """The table's wall time, summed over what the records kept (``gt_classifier`` evaluates
+    Mem-0's checkpoint and trains nothing)."""
+    res = load("table_state.json")
+    cells = [(s, c) for row in res["cells"].values() for s, c in row.items()]
+    trained = [c for s, c in cells if s != "mem0:gt_classifier"]
+    kept = [c["train_wall_s"] for c in trained if c["train_wall_s"] is not None]
+    partial = sum(1 for c in trained if c["train_wall_from_step"])
+    gpu = sum(1 for c in trained if any(m.get("gpu") for m in c["machines"]["train"]))
+    evals = [c["eval_wall_s"] for _, c in cells if c["eval_wall_s"] is not None]
+    rows = [["trainings (18,000 steps each)", str(len(trained)),
+             f"{sum(kept) / 3600:.1f} h kept (CPU and GPU pieces together)"],
+            ["of them timed from a resumed step (the earlier pieces' walls not kept)", str(partial), ""],
+            ["of them wholly or partly on a GPU", str(gpu), ""],
+            ["evaluations (100 episodes each)", str(len(evals)), f"{sum(evals) / 3600:.1f} h"]]
+    return markdown(["what", "cells", "wall time"], rows)
+
+
+def eval_walls() -> str:
+    """What 100 episodes of a task take to evaluate: the state table's cells, one worker."""
+    res = load("table_state.json")
+    rows = []
+    for task in ordered():
+        row = res["cells"][task.name]
+        rows.append([task.name, task.step_limit,
+                     *(minutes(row[s]["eval_wall_s"]) for s in ("mem0", "dp", "act"))])
+    return markdown(["task", "step limit", "Mem-0", "DP", "ACT"], rows)
+
+
+# ------------------------------------------------------------------ put_back_block, state
+# the milestones of the recipe search, in order; each row shows what its --set changed
+STATE_RUNS = ["learning_state_put_back_block_white0.02.json",
+              "learning_state_put_back_block_no_state_noise.json",
+              "learning_state_put_back_block.json",
+              "learning_state_put_back_block_mats0.02.json",
+              "learning_state_put_back_block_grasp_pose.json",
+              "learning_state_put_back_block_layout_copies.json"]
+
+
+def _recipe_change(before: dict | None, run: dict) -> str:
+    """What ``run``'s recipe changed from ``before``'s: its new or changed ``--set`` items and
+    its steps if they differ (the whole recipe for the first row)."""
+    old = dict(x.split("=", 1) for x in before["set"]) if before else {}
+    new = dict(x.split("=", 1) for x in run["set"])
+    parts = [f"`{k}={v}`" for k, v in new.items() if old.get(k) != v]
+    parts += [f"without `{k}`" for k in old if k not in new]
+    if before is None or before["steps"] != run["steps"]:
+        parts.append(f"{run['steps']:,} steps")
+    return ("" if before is None else "+ ") + ", ".join(parts)
+
+
+def learning_state() -> str:
+    specs = ["mem0", "mem0:no_memory", "mem0:no_anchor", "mem0:no_sliding"]
+    rows, before = [], None
+    for name in STATE_RUNS:
+        d = load(name)
+        p = d["policies"]
+        rows.append([_recipe_change(before, d), f"`{Path(name).stem}`", *(rate(p.get(s)) for s in specs),
+                     minutes(p["mem0"].get("train_wall_s"))])
+        before = d
+    return markdown(["recipe (`--set`; each row changes the one above)", "results JSON",
+                     *(COLUMN[s] for s in specs), "Mem-0 train wall"], rows)
+
+
+def learning_state_more() -> str:
+    val = load("learning_state_put_back_block_layout_copies_seed1.json")["policies"]
+    more = load("learning_state_put_back_block_200demos.json")["policies"]
+    base = load("learning_state_put_back_block.json")["policies"]
+    rows = [["the recipe, second block of held-out layouts (seeds from 200000)", rate(val["mem0"]), "—"],
+            ["1 cm noise on every position, 50 demonstrations", rate(base["mem0"]),
+             rate(base["mem0:no_memory"])],
+            ["the same, 200 demonstrations", rate(more["mem0"]), rate(more["mem0:no_memory"])]]
+    return markdown(["run", "Mem-0", "`no_memory`"], rows)
+
+
+# ------------------------------------------------------------------ put_back_block, pixels
+PIXEL_RUNS = [
+    ("learning_pixels_put_back_block_backbone_s8.json", "frozen EfficientNet-Lite0, stride 8"),
+    ("learning_pixels_put_back_block_backbone_s16.json", "stride 16"),
+    ("learning_pixels_put_back_block_layout_copies_s16.json", "stride 16, 8 rendered layout copies"),
+    ("learning_pixels_put_back_block_layout_copies_s16_54k.json", "the same, 54,000 steps"),
+    ("learning_pixels_put_back_block_layout_copies_s16_90k.json", "the same, 90,000 steps"),
+]
+
+
+def learning_pixels() -> str:
+    specs = ["mem0", "mem0:no_memory", "mem0:no_anchor", "mem0:no_sliding", "dp", "act"]
+    rows = []
+    for name, run in PIXEL_RUNS:
+        d = load(name)
+        p = d["policies"]
+        steps = p["mem0"].get("steps") or d.get("steps") or int(
+            re.search(r"--steps (\d+)", d["train_command"]).group(1))
+        rows.append([run, f"{steps:,}", *(rate(p.get(s)) for s in specs),
+                     minutes(p["mem0"].get("train_wall_s")),
+                     f"{d['machine'].get('torch_threads', '—')}"])
+    return markdown(["run", "Mem-0 steps", *(COLUMN[s] for s in specs), "Mem-0 train wall",
+                     "torch threads"], rows)
+
+
+# ------------------------------------------------------------------ experts, aliasing, speed
+def _robustness_cells() -> dict[tuple[str, str, float], dict]:
+    cells = {}
+    for path in sorted((RESULTS / "robustness").glob("*.json")):
+        c = json.loads(path.read_text())
+        cells[(c["task"], c["kind"], float(c["sigma"]))] = c
+    return cells
+
+
+ROBUSTNESS_COLUMNS = [("white", 0.0), ("smooth", 0.01), ("smooth", 0.02), ("smooth", 0.03),
+                      ("offset", 0.02), ("offset", 0.03), ("white", 0.01), ("white", 0.02),
+                      ("white", 0.03)]
+
+
+def robustness() -> str:
+    cells = _robustness_cells()
+    rows = []
+    for task in ordered():
+        row = [cells.get((task.name, k, s)) for k, s in ROBUSTNESS_COLUMNS]
+        rows.append([task.name] + [f"{rate(c)} ({c['episodes']})" if c else "-" for c in row])
+    raised = sum(c["expert_raised"] for c in cells.values())
+    episodes = sum(c["episodes"] for c in cells.values())
+    wall = sum(c["wall_s"] for c in cells.values())
+    head = [f"{k} {s:g}" if s else "no noise" for k, s in ROBUSTNESS_COLUMNS]
+    return (markdown(["task", *head], rows)
+            + f"\nEpisodes: {episodes}, in which an expert raised: {raised}; wall time of the "
+            f"{len(cells)} cells: {wall / 3600:.1f} h. In parentheses: episodes per cell.\n")
+
+
+def robustness_margin() -> str:
+    cells = _robustness_cells()
+    rows = []
+    for task in ordered():
+        c = cells[(task.name, "white", 0.0)]
+        longest = c["longest_success_steps"]
+        rows.append([task.name, f"{c['successes']}/{c['episodes']}", f"{longest} steps", c["step_limit"],
+                     f"{c['step_limit'] / longest:.2f}x"])
+    return markdown(["task", "success", "longest successful episode", "step limit", "margin"], rows)
+
+
+def robustness_failures() -> str:
+    cells = _robustness_cells()
+    lines = []
+    for task in ordered():
+        for kind, sigma in ROBUSTNESS_COLUMNS:
+            c = cells.get((task.name, kind, sigma))
+            if c is None or not c["failures"]:
+                continue
+            merged: dict[str, int] = {}
+            for reason, n in c["failures"].items():
+                for cut in (" to [", " at [", " reach ["):  # coordinates make every reason unique
+                    if cut in reason:
+                        reason = reason.split(cut)[0] + cut.rstrip(" [")
+                merged[reason] = merged.get(reason, 0) + n
+            ends = "; ".join(f"{r} ({n})" for r, n in sorted(merged.items(), key=lambda x: -x[1])[:4])
+            lines.append(f"- {task.name}, {kind} {sigma:g}: {ends}")
+    return "\n".join(lines) + "\n"
+
+
+def aliasing() -> str:
+    d = load("aliasing.json")
+    rows = [[t["task"], t["tmc"], f"{t['steps'][0]} / {t['steps'][1]}",
+             " / ".join(t["next_subtasks"]), f"{t['pixel_distance']:.3f}",
+             f"{t['unrelated_distance']:.3f}", f"{t['ratio']:.3f}", f"{t['arm_gap']:.4f}"]
+            for t in d["tasks"]]
+    return markdown(["task", "TMC", "steps", "next subtask at each", "pixel distance",
+                     "unrelated layout", "ratio", "arms' joint gap (rad)"], rows)
+
+
+def speed() -> str:
+    sim, collect = load("sim_speed.json"), load("collect_speed.json")
+    ev, pol = load("eval_speed.json"), load("policy_speed.json")
+    cams = f"{len(sim['cameras'])} cameras {sim['resolution']}"
+    two = next(r for r in collect["rows"] if r["workers"] == 2)
+    one = next(r for r in collect["rows"] if r["workers"] == 1 and "search" in r["run"])
+    direct = next(r for r in collect["rows"] if "direct" in r["run"])
+    p = pol["policies"]
+    rows = [
+        [f"env steps/s, {cams} ({sim['gl_backend'].upper()})", f"{sim['env_steps_per_s_rendered']}",
+         "`benchmarks/sim_speed.py`"],
+        ["bare MuJoCo render of the same cameras, sets/s",
+         f"{sim['bare_render_sets_per_s']} (env / bare {sim['ratio_env_to_bare_render']:.2f})", "same run"],
+        ["env steps/s, physics only", f"{sim['env_steps_per_s_physics_only']:.0f}", "same run"],
+        [f"50 {collect['task']} demonstrations, {collect['cameras']} cameras "
+         f"{collect['resolution']}, 2 workers",
+         f"{collect['time_for_50_demos_s']:.0f} s ({two['demos_per_min']:.1f} demos/min; "
+         f"{one['demos_per_min']:.1f} with 1 worker)", "`benchmarks/collect_speed.py`"],
+        ["recorder overhead vs the expert with cameras, nothing saved",
+         f"{one['overhead']:.2f}x (seed search + replay), {direct['overhead']:.2f}x (direct)", "same run"],
+        ["dataset size per demonstration",
+         f"{one['mb_per_demo']:.2f} MB ({one['frames_per_demo']:.0f} frames)", "same run"],
+        ["evaluation harness vs bare env, `noop` policy", f"{ev['harness_vs_bare']:.2f}x",
+         "`benchmarks/eval_speed.py`"],
+        [f"closed loop, {pol['inference_threads']} thread, {len(pol['cameras'])} cameras, Hz",
+         f"Mem-0 {p['mem0']['hz']} (planner {p['mem0']['planner_ms']} ms), DP {p['dp']['hz']}, "
+         f"ACT {p['act']['hz']}", "`benchmarks/policy_speed.py`"],
+        [f"training steps/s, {pol['training_threads']} threads, batch {pol['batch_size']}",
+         f"Mem-0 {p['mem0']['train_steps_per_s']}, DP {p['dp']['train_steps_per_s']}, "
+         f"ACT {p['act']['train_steps_per_s']}", "same run"],
+    ]
+    return markdown(["what", "figure", "command"], rows)
+
+
+def policy_speed() -> str:
+    pol = load("policy_speed.json")
+    rows = []
+    for name, p in pol["policies"].items():
+        rows.append([COLUMN[name], f"{p['step_ms']:.1f}", f"{p['hz']}", f"{p['params'] / 1e6:.1f} M",
+                     f"{p['planner_ms']} ms" if "planner_ms" in p else "—",
+                     f"{p['memory_store_floats']:,}" if "memory_store_floats" in p else "—",
+                     f"{p['rss_growth_mb']} MB", f"{p['train_steps_per_s']}"])
+    return markdown(["policy", "closed-loop step (ms)", "Hz", "parameters", "planner call (8 keys)",
+                     "memory store (floats)", f"RSS growth over {pol['steps']} steps",
+                     f"training steps/s ({pol['training_threads']} threads, batch {pol['batch_size']})"],
+                    rows)
+
+
+def backbone_speed() -> str:
+    """Mem-0's training on cached frozen-backbone features against on frames with its CNNs."""
+    rows = []
+    for name, label in (("policy_speed_backbone.json", "default head"),
+                        ("policy_speed_backbone_recipe_b128.json", "the state recipe's head")):
+        d = load(name)
+        res = d["results"]
+        cnn = res["cnn"]["mem0"]["train_steps_per_s"]
+        for case in ("stride8", "stride16", "stride32"):
+            r = res[case]
+            rows.append([f"{label}, batch {d['batch_size']}", case.replace("stride", "stride "),
+                         f"{r['mem0']['train_steps_per_s']} ({r['mem0']['train_steps_per_s'] / cnn:.1f}x "
+                         f"of {cnn} on frames)", f"{r['mem0']['step_ms']:.1f}", f"{r['dp']['step_ms']:.1f}",
+                         f"{r['act']['step_ms']:.1f}", f"{r['encode_frames_per_s']:.0f}"])
+    return markdown(["Mem-0", "feature map", "training steps/s, 1 thread", "Mem-0 step (ms)",
+                     "DP step (ms)", "ACT step (ms)", "cache: frames encoded/s"], rows)
+
+
+TABLES: dict[str, Callable[[], str]] = {
+    "tasks": tasks,
+    "readme-results": readme_results, "state-policies": state_policies,
+    "state-ablations": state_ablations, "state-records": state_records,
+    "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,
+    "learning-state": learning_state, "learning-state-more": learning_state_more,
+    "learning-pixels": learning_pixels, "robustness": robustness,
+    "robustness-margin": robustness_margin, "robustness-failures": robustness_failures,
+    "aliasing": aliasing, "speed": speed, "policy-speed": policy_speed,
+    "backbone-speed": backbone_speed,
+}
+
+
+def render(text: str, path: Path) -> str:
+    """``text`` with every marked table rendered; an unknown name is a ValueError."""
+    def one(m: re.Match) -> str:
+        name = m.group(2)
+        if name not in TABLES:
+            raise ValueError(f"{path}: unknown table {name!r} (known: {', '.join(TABLES)})")
+        return m.group(1) + TABLES[name]() + m.group(4)
+    return MARKER.sub(one, text)
+
+
+def stale(paths: list[Path] = DOCS) -> list[str]:
+    """'PATH: NAME' for every table whose committed text differs from its rendering."""
+    out = []
+    for path in paths:
+        text = path.read_text()
+        for m in MARKER.finditer(text):
+            if m.group(2) in TABLES and TABLES[m.group(2)]() != m.group(3):
+                out.append(f"{path.relative_to(ROOT)}: {m.group(2)}")
+        render(text, path)  # raises on an unknown name
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--check", action="store_true", help="only list the tables that differ")
+    args = p.parse_args(argv)
+    if args.check:
+        diff = stale()
+        for line in diff:
+            print(f"stale table: {line} (python scripts/render_docs.py rewrites it)")
+        return 1 if diff else 0
+    for path in DOCS:
+        text = path.read_text()
+        new = render(text, path)
+        if new != text:
+            write_atomic(path, new.encode())
+            print(f"rewrote {path.relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
