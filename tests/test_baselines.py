@@ -20,7 +20,7 @@ from rmbench.policies.dp.config import DPConfig
 from rmbench.policies.nn.diffusion import DDPMSchedule
 from rmbench.policies.nn.unet1d import ConditionalUnet1D
 from rmbench.training.loop import TrainConfig
-from tests.conftest import roll_out
+from tests.conftest import EXPORTED, keep_exports, roll_out
 
 SMALL = {"cameras": ("head", "left_wrist"), "image_size": (48, 64), "encoder_channels": (8, 16, 16),
          "jitter": (0.0, 0.0, 0.0)}
@@ -40,7 +40,8 @@ def train_tiny(name, dataset, out, steps=6, cfg=None, **kw):
 @pytest.fixture(scope="module", params=sorted(BASELINES))
 def ckpt(request, dataset, tmp_path_factory):
     out = tmp_path_factory.mktemp("ckpt") / request.param
-    train_tiny(request.param, dataset, out)
+    with keep_exports():
+        train_tiny(request.param, dataset, out)
     return request.param, out
 
 
@@ -155,6 +156,7 @@ OVERFIT = {"dp": (400, {"down_dims": (64, 128, 256)}, 0.5, 0.9),
            "act": (300, {}, 0.3, 0.5)}
 
 
+@pytest.mark.slow  # hundreds of pixel training steps: minutes of a shared CPU per policy
 @pytest.mark.parametrize("name", sorted(BASELINES))
 def test_baseline_overfits_a_tiny_dataset(name, dataset, tmp_path):
     base, _, policy_cls = BASELINES[name]
@@ -229,13 +231,22 @@ def test_a_training_killed_and_resumed_keeps_the_wall_time_of_its_saved_steps(
 
 
 # ------------------------------------------------------------------ checkpoints and the loop
+def round_trip(policy_cls, path, env):
+    """The actions of the checkpoint at ``path`` loaded, and of the model its training held in
+    memory when it saved it, over the same steps."""
+    from rmbench.policies.checkpoint import read_config
+
+    trained = policy_cls.from_model(EXPORTED[path], read_config(path))
+    return [np.stack(roll_out(env, p, seed=100001, steps=6)[1])
+            for p in (trained, policy_cls(str(path), env))]
+
+
 def test_checkpoint_round_trip_gives_identical_actions(ckpt):
     name, path = ckpt
     policy_cls = BASELINES[name][2]
     env = make("observe_and_pickup", cameras=("head", "left_wrist"), width=64, height=48)
     # an untrained policy may fail the task at once: roll_out stops where the episode ends
-    runs = [np.stack(roll_out(env, policy_cls(str(path), env), seed=100001, steps=6)[1])
-            for _ in range(2)]
+    runs = round_trip(policy_cls, path, env)
     env.close()
     np.testing.assert_array_equal(runs[0], runs[1])
     assert runs[0].shape[1] == 14 and np.isfinite(runs[0]).all()
@@ -299,7 +310,8 @@ def state_cfg(name):
 @pytest.fixture(scope="module", params=sorted(BASELINES))
 def state_ckpt(request, dataset, tmp_path_factory):
     out = tmp_path_factory.mktemp("ckpt") / f"{request.param}_state"
-    train_tiny(request.param, dataset, out, cfg=state_cfg(request.param))
+    with keep_exports():
+        train_tiny(request.param, dataset, out, cfg=state_cfg(request.param))
     return request.param, out
 
 
@@ -410,8 +422,7 @@ def test_state_checkpoint_round_trip_and_the_pixel_observation_error(state_ckpt)
     name, path = state_ckpt
     policy_cls = BASELINES[name][2]
     env = make("observe_and_pickup", obs_type="environment_state_agent_pos")
-    runs = [np.stack(roll_out(env, policy_cls(str(path), env), seed=100001, steps=6)[1])
-            for _ in range(2)]
+    runs = round_trip(policy_cls, path, env)
     env.close()
     np.testing.assert_array_equal(runs[0], runs[1])
     assert runs[0].shape[1] == 14 and np.isfinite(runs[0]).all()

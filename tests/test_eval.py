@@ -113,10 +113,13 @@ def test_sigkill_and_resume_gives_exactly_n_unique_episodes(tmp_path):
     path = out / TASK / "episodes.jsonl"
     deadline = time.time() + 120
     while not (path.exists() and path.read_text().count("\n") >= 1) and time.time() < deadline:
+        assert proc.poll() is None, "the evaluation ended before it was killed"
         time.sleep(0.02)
     os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
-    assert subprocess.run(cmd, capture_output=True, env=env).returncode == 0
+    assert proc.wait(timeout=30) == -signal.SIGKILL  # killed, not finished
+    # killed with its work unfinished: a resume has episodes to add
+    assert 1 <= path.read_text().count("\n") < 4
+    assert subprocess.run(cmd, capture_output=True, env=env, timeout=300).returncode == 0
     seeds = [r["seed"] for r in read_records(path)]
     assert len(seeds) == 4 and len(set(seeds)) == 4
 
@@ -170,7 +173,16 @@ def test_report_renders_markdown_and_html(tmp_path):
     md = write_report([tmp_path / "out"], tmp_path / "r.md", ["Mem-0"]).read_text()
     # each rate beside its 95% interval: 2 of 2 here, 4 of the published 100 rollouts
     assert "| observe_and_pickup | M(1) | 100.0 [34, 100] | 4.0 [2, 10] |" in md
-    assert "| **average M(1)** | M(1) | — | 52.8 [48, 57] |" in md  # others not evaluated
+    # the published column averages every M(1) task's published rate, evaluated here or not,
+    # with the interval of the pooled rollouts (100 per task)
+    from rmbench.eval.intervals import wilson
+    from rmbench.eval.report import PUBLISHED
+    from rmbench.tasks.registry import ordered
+    m1 = [PUBLISHED["Mem-0"][t.name] for t in ordered() if t.tmc == "M(1)"]
+    low, high = wilson(sum(m1), 100 * len(m1))
+    assert len(m1) == 5
+    assert (f"| **average M(1)** | M(1) | — | {sum(m1) / len(m1):.1f} "
+            f"[{100 * low:.0f}, {100 * high:.0f}] |") in md  # others not evaluated
     assert "| observe_and_pickup | M(1) | 100.0 |\n" in md  # progress: no interval
     page = write_report([tmp_path / "out"], tmp_path / "r.html", []).read_text()
     assert "<svg" in page and "seed-100000.mp4" in page

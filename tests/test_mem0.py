@@ -2,6 +2,7 @@
 and the closed loop."""
 
 import json
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -10,7 +11,7 @@ import torch
 
 from rmbench.data.reader import Dataset
 from rmbench.envs.registration import make
-from rmbench.policies.checkpoint import CheckpointError
+from rmbench.policies.checkpoint import CheckpointError, read_config
 from rmbench.policies.mem0.agent import Mem0Policy
 from rmbench.policies.mem0.classifier import Debounce, end_labels
 from rmbench.policies.mem0.config import Mem0Config
@@ -18,7 +19,7 @@ from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import Planner, planner_examples, runs
 from rmbench.policies.mem0.train import train_mem0
 from rmbench.training.loop import TrainConfig, TrainingError
-from tests.conftest import roll_out
+from tests.conftest import EXPORTED, keep_exports, roll_out
 
 TINY = Mem0Config(cameras=("head", "left_wrist"), planner_cameras=("head",), image_size=(48, 64),
                   dim=32, encoder_channels=(8, 16, 16), keypoints=4, heads=2, head_layers=1,
@@ -34,7 +35,8 @@ def train_tiny(dataset, out, steps=6, cfg=TINY, **kw):
 @pytest.fixture(scope="module")
 def mn_ckpt(mn_dataset, tmp_path_factory):
     out = tmp_path_factory.mktemp("ckpt") / "mn"
-    train_tiny(mn_dataset, out)
+    with keep_exports():
+        train_tiny(mn_dataset, out)
     return out
 
 
@@ -157,6 +159,7 @@ def sampled_action_error(model, dataset) -> float:
     return float(np.mean(errors))
 
 
+@pytest.mark.slow  # 300 pixel training steps: minutes of a shared CPU
 def test_executor_overfits_a_tiny_dataset(dataset, tmp_path):
     import csv
 
@@ -254,10 +257,17 @@ def test_a_run_from_before_a_config_field_resumes_with_its_default(dataset, tmp_
     assert train_tiny(dataset, tmp_path / "r", steps=6)["resumed_from"] == 3
 
 # ------------------------------------------------------------------ checkpoints and the loop
+def round_trip(path, env):
+    """The actions of the checkpoint at ``path`` loaded, and of the model its training held in
+    memory when it saved it, over the same steps."""
+    loaded = Mem0Policy(str(path), env)
+    trained = Mem0Policy.from_model(EXPORTED[path], read_config(path, "mem0"), env)
+    return [np.stack(roll_out(env, p, seed=100001, steps=6)[1]) for p in (trained, loaded)]
+
+
 def test_checkpoint_round_trip_gives_identical_actions(mn_ckpt):
     env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
-    runs_ = [np.stack(roll_out(env, Mem0Policy(str(mn_ckpt), env), seed=100001, steps=6)[1])
-             for _ in range(2)]
+    runs_ = round_trip(mn_ckpt, env)
     env.close()
     np.testing.assert_array_equal(runs_[0], runs_[1])
     assert runs_[0].shape == (6, 14) and np.isfinite(runs_[0]).all()
@@ -327,7 +337,17 @@ def test_vlm_planner_backend_trains_with_lora(mn_dataset, tmp_path):
     cfg = replace(TINY, planner_backend="vlm", planner_steps=40, planner_lr=3e-3)
     train_tiny(mn_dataset, tmp_path / "v", steps=1, cfg=cfg)
     report = json.loads((tmp_path / "v" / "training" / "planner.json").read_text())
-    assert report["decisions"] > 0 and report["final_loss"] < 1.6  # ln(4) = 1.39 is chance
+    # above what no learning reaches: the best constant answer's accuracy on these decisions,
+    # and the loss of a uniform guess over the candidates
+    ds = Dataset(mn_dataset)
+    episodes = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
+    targets = [x.target for e, ep in enumerate(episodes)
+               for x in planner_examples(e, ep.subtask_index, ep.subtask_step, -1)]
+    constant = max(targets.count(t) for t in set(targets)) / len(targets)
+    candidates = len(json.loads((tmp_path / "v" / "config.json").read_text())["planner_texts"])
+    assert report["decisions"] == len(targets)
+    assert report["train_accuracy"] > constant, (report, constant)
+    assert report["final_loss"] < math.log(candidates), report
     from rmbench.policies.mem0.agent import load_mem0
     model, _, _ = load_mem0(tmp_path / "v")
     lm = model.planner.lm
@@ -376,7 +396,8 @@ def no_frames(monkeypatch):
 @pytest.fixture(scope="module")
 def mn_state_ckpt(mn_dataset, tmp_path_factory):
     out = tmp_path_factory.mktemp("ckpt") / "mn_state"
-    train_tiny(mn_dataset, out, cfg=TINY_STATE)
+    with keep_exports():
+        train_tiny(mn_dataset, out, cfg=TINY_STATE)
     return out
 
 
@@ -416,8 +437,7 @@ def test_state_planner_and_memories_hold_state_embeddings(mn_state_ckpt, mn_data
 
 def test_state_checkpoint_round_trip_and_the_pixel_observation_error(mn_state_ckpt):
     env = make("press_button", obs_type="environment_state_agent_pos")
-    runs_ = [np.stack(roll_out(env, Mem0Policy(str(mn_state_ckpt), env), seed=100001, steps=6)[1])
-             for _ in range(2)]
+    runs_ = round_trip(mn_state_ckpt, env)
     env.close()
     np.testing.assert_array_equal(runs_[0], runs_[1])
     assert runs_[0].shape == (6, 14) and np.isfinite(runs_[0]).all()

@@ -7,7 +7,7 @@ from websockets.sync.client import connect
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.harness import read_records
 from rmbench.serve.server import PolicyServer
-from rmbench.serve.wire import WireError, pack, unpack
+from rmbench.serve.wire import PROTOCOL, WireError, pack, unpack
 from tests.conftest import DATA_TASK as TASK
 
 
@@ -45,7 +45,7 @@ def test_remote_evaluation_equals_the_local_policy(server, tmp_path):
 def test_malformed_messages_get_an_error_and_the_server_keeps_serving(server):
     with connect(f"ws://127.0.0.1:{server.port}") as ws:
         meta = unpack(ws.recv(timeout=10))
-        assert meta["server"] == "rmbench" and meta["protocol"] == 1
+        assert meta["server"] == "rmbench" and meta["protocol"] == PROTOCOL
         for bad in (b"\xc1\x00", "text", pack([1, 2]), pack({"reset": True, "task_info": "x"})):
             ws.send(bad)
             assert "error" in unpack(ws.recv(timeout=10))

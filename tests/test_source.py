@@ -20,7 +20,7 @@ def test_this_run_and_its_subprocesses_import_this_checkout():
     assert Path(rmbench.__file__).resolve().is_relative_to(SRC)
     found = subprocess.run(
         [sys.executable, "-c", "import importlib.util; print(importlib.util.find_spec('rmbench').origin)"],
-        capture_output=True, text=True, check=True).stdout.strip()
+        capture_output=True, text=True, check=True, timeout=60).stdout.strip()
     assert Path(found).resolve().is_relative_to(SRC)
 
 

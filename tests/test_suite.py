@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from rmbench.cli.main import main as cli
+from rmbench.eval.chance import chance
 from rmbench.machine import describe, short
 from rmbench.suite import runner, stages, tables
 from rmbench.suite.plan import (
@@ -133,8 +134,10 @@ def test_toy_table_end_to_end_and_resumed(toy_table, capsys):
     assert "| observe_and_pickup | M(1) |" in text and "(published)" in text
     assert f"stages ran on {short(describe())}." in text
     # each task's chance level beside the published numbers, and what it assumes
-    assert "chance (no memory) |" in text and "- observe_and_pickup: 24.0%" in text
-    assert res["chance"]["observe_and_pickup"]["rate"] == pytest.approx(0.24, abs=0.01)
+    # eval/chance.py's level (tested there), as the table shows it
+    level = chance("observe_and_pickup").rate
+    assert "chance (no memory) |" in text and f"- observe_and_pickup: {100 * level:.1f}%" in text
+    assert res["chance"]["observe_and_pickup"]["rate"] == level
     # a re-run finds every cell done: no job runs, nothing is rewritten but the tables
     checkpoint = out / "observe_and_pickup" / "train" / "mem0-s6-b4" / "model.safetensors"
     mtime = checkpoint.stat().st_mtime_ns
@@ -332,20 +335,6 @@ def test_rendered_copies_are_the_training_data_with_their_features_encoded_once(
             replace(plan, **bad)
 
 
-@pytest.mark.slow
-def test_toy_table_on_ray(tmp_path):
-    """The same toy table on a local Ray instance (the rmbench[ray] extra; 5 min beside two
-    training runs on 2 cores, most of it Ray's start-up)."""
-    pytest.importorskip("ray")
-    out = tmp_path / "table"
-    assert cli(["table", "--obs", "state", "--tasks", "observe_and_pickup", "--policies", "dp",
-                "--demos", "2", "--steps", "6", "--batch", "4", "--episodes", "1", "--out",
-                str(out), "--jobs", "2", "--backend", "ray"]) == 0
-    row = json.loads((out / "table.json").read_text())["cells"]["observe_and_pickup"]["dp"]
-    assert row["episodes"] == 1
-    assert (out / "logs" / "train_observe_and_pickup_dp.log").exists()
-
-
 def test_a_terminated_table_stops_its_jobs(toy_table, tmp_path):
     """SIGTERM to the runner mid-training: it exits, and so does the training job (a re-run
     then resumes from what the job saved, the training loop's own tests cover that)."""
@@ -389,7 +378,7 @@ def test_a_terminated_table_stops_its_jobs(toy_table, tmp_path):
     finally:  # a failed assertion leaves nothing running
         if proc.poll() is None:
             proc.kill()
-            proc.wait()
+            proc.wait(timeout=30)
         for pid in jobs():
             os.kill(int(pid), signal.SIGKILL)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
@@ -122,8 +123,18 @@ def cmd_serve(args) -> int:
     from rmbench.serve.server import PolicyServer
     from rmbench.tasks import get_task
 
-    PolicyServer(args.policy, get_task(args.task).name, args.host, args.port).serve_forever()
+    PolicyServer(args.policy, get_task(args.task).name, args.host, args.port,
+                 max_connections=args.max_connections, idle_timeout=args.idle_timeout,
+                 origins=args.origin, frame_max=args.frame_max).serve_forever()
     return 0
+
+
+def frame_size(text: str) -> tuple[int, int]:
+    """``HxW`` -> (H, W), for argparse."""
+    h, sep, w = text.partition("x")
+    if not (sep and h.isdigit() and w.isdigit() and int(h) > 0 and int(w) > 0):
+        raise argparse.ArgumentTypeError(f"expected HEIGHTxWIDTH, e.g. 480x640, got {text!r}")
+    return int(h), int(w)
 
 
 def add_parsers(sub) -> None:
@@ -203,4 +214,13 @@ def add_parsers(sub) -> None:
     p.add_argument("--task", required=True, help="the task the policy acts in")
     p.add_argument("--host", default="127.0.0.1", help="bind address (default: this machine only)")
     p.add_argument("--port", type=int, default=8000)
+    p.add_argument("--max-connections", type=int, default=4,
+                   help="clients served at once; more are refused (default 4)")
+    p.add_argument("--idle-timeout", type=float, default=300.0, metavar="SECONDS",
+                   help="close a connection that sends nothing for this long (default 300)")
+    p.add_argument("--origin", action="append", metavar="ORIGIN",
+                   help="accept only browsers' connections from this Origin (repeatable); "
+                        "default: no check (a web page on this machine can then connect)")
+    p.add_argument("--frame-max", type=frame_size, default=(480, 640), metavar="HxW",
+                   help="the largest camera frame accepted (default 480x640)")
     p.set_defaults(func=cmd_serve)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -19,6 +20,18 @@ from rmbench.data.writer import DatasetError
 from rmbench.video import decode_video
 
 VECTOR_KEYS = (L.STATE, L.EE_POSE, L.ACTION)
+FEATURE_DTYPES = ("video", "float32", "int64", "bool")
+# a camera's name becomes a folder name: letters, digits and underscores only
+CAMERA_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
+# meta/episodes columns a reader relies on, with what their one value must be
+EPISODE_COLUMNS = {"episode_index": pa.types.is_integer, "length": pa.types.is_integer,
+                   "dataset_from_index": pa.types.is_integer,
+                   "dataset_to_index": pa.types.is_integer,
+                   "tasks": lambda t: pa.types.is_list(t) and pa.types.is_string(t.value_type),
+                   "rmbench/task": pa.types.is_string, "rmbench/seed": pa.types.is_integer,
+                   "rmbench/tmc": pa.types.is_string, "rmbench/hidden": pa.types.is_string,
+                   "rmbench/key_frames": lambda t: pa.types.is_list(t)
+                   and pa.types.is_integer(t.value_type)}
 
 
 @dataclass
@@ -78,6 +91,66 @@ def read_json(path: Path) -> dict:
         raise DatasetError(f"{path}: not readable JSON ({err})") from None
 
 
+def _is_count(value) -> bool:
+    return type(value) is int and value >= 0
+
+
+def check_info(info, path: Path) -> dict:
+    """``info`` (meta/info.json) if it holds what a reader reads, of the types it reads them
+    as; else a one-line DatasetError naming the first field that does not."""
+    if not isinstance(info, dict):
+        raise DatasetError(f"{path}: not a JSON object")
+    if info.get("codebase_version") != L.CODEBASE_VERSION:
+        raise DatasetError(f"{path}: codebase_version {info.get('codebase_version')!r}, "
+                           f"expected {L.CODEBASE_VERSION!r}")
+    for key in ("total_episodes", "total_frames", "total_tasks"):
+        if not _is_count(info.get(key)):
+            raise DatasetError(f"{path}: {key} must be an integer >= 0, got {info.get(key)!r:.40}")
+    if not _is_count(info.get("fps")) or info["fps"] == 0:
+        raise DatasetError(f"{path}: fps must be a positive integer, got {info.get('fps')!r:.40}")
+    features = info.get("features")
+    if not isinstance(features, dict) or not features:
+        raise DatasetError(f"{path}: no 'features'")
+    for key, ft in features.items():
+        shape = ft.get("shape") if isinstance(ft, dict) else None
+        if not isinstance(ft, dict) or ft.get("dtype") not in FEATURE_DTYPES or not (
+                isinstance(shape, list) and shape and all(_is_count(n) and n for n in shape)):
+            raise DatasetError(f"{path}: feature {key!r:.60} needs a dtype of "
+                               f"{', '.join(FEATURE_DTYPES)} and a shape of positive sizes")
+        if ft["dtype"] == "video":
+            camera = key[len(L.IMAGE_PREFIX):]
+            if not key.startswith(L.IMAGE_PREFIX) or not CAMERA_NAME.fullmatch(camera):
+                raise DatasetError(f"{path}: video feature {key!r:.60} is not "
+                                   f"{L.IMAGE_PREFIX}CAMERA with CAMERA letters, digits, '_'")
+            if len(shape) != 3 or shape[2] != 3:
+                raise DatasetError(f"{path}: video feature {key!r} has shape {shape}, "
+                                   f"expected [height, width, 3]")
+        elif len(shape) != 1:
+            raise DatasetError(f"{path}: feature {key!r} has shape {shape}, expected [size]")
+    env_state = features.get(L.ENV_STATE)
+    if env_state is not None:
+        names = env_state.get("names")
+        if not (isinstance(names, list) and all(isinstance(n, str) for n in names)
+                and len(names) == env_state["shape"][0]):
+            raise DatasetError(f"{path}: {L.ENV_STATE} needs one name per entry")
+    return info
+
+
+def _names(path: Path, index: str, column_name: str) -> list[str]:
+    """The texts of a tasks or subtasks table (its pandas index), ordered by ``column_name``."""
+    table = read_parquet(path)
+    if column_name not in table.column_names or not pa.types.is_integer(
+            table.schema.field(column_name).type):
+        raise DatasetError(f"{path}: no integer {column_name!r} column")
+    frame = table.to_pandas()
+    if frame.index.name != index:
+        raise DatasetError(f"{path}: its rows are not indexed by {index!r}")
+    ordered = frame.sort_values(column_name)
+    if ordered[column_name].tolist() != list(range(len(frame))):
+        raise DatasetError(f"{path}: {column_name} is not 0..{len(frame) - 1}")
+    return [str(t) for t in ordered.index]
+
+
 def column(table: pa.Table, name: str) -> np.ndarray:
     col = table.column(name).combine_chunks()
     if pa.types.is_fixed_size_list(col.type) or pa.types.is_list(col.type):
@@ -93,11 +166,10 @@ class Dataset:
         self.root = L.root_path(root)
         if not self.root.is_dir():
             raise DatasetError(f"{self.root}: no such dataset folder")
-        self.info = read_json(self.root / L.INFO)
-        if self.info.get("codebase_version") != L.CODEBASE_VERSION:
-            raise DatasetError(f"{self.root / L.INFO}: codebase_version "
-                               f"{self.info.get('codebase_version')!r}, expected {L.CODEBASE_VERSION!r}")
+        self.info = check_info(read_json(self.root / L.INFO), self.root / L.INFO)
         self.rmbench = read_json(self.root / L.RMBENCH)
+        if not isinstance(self.rmbench, dict) or not isinstance(self.rmbench.get("task"), str):
+            raise DatasetError(f"{self.root / L.RMBENCH}: no task name")
         if self.rmbench.get("format") != L.FORMAT:
             raise DatasetError(
                 f"{self.root / L.RMBENCH}: dataset format {self.rmbench.get('format')!r}, this rmbench "
@@ -106,10 +178,8 @@ class Dataset:
         self.fps: int = self.info["fps"]
         self.cameras = [k[len(L.IMAGE_PREFIX):] for k, f in self.features.items()
                         if f["dtype"] == "video"]
-        tasks = read_parquet(self.root / L.TASKS).to_pandas()
-        self.instructions: list[str] = [str(t) for t in tasks.sort_values("task_index").index]
-        subtasks = read_parquet(self.root / L.SUBTASKS).to_pandas()
-        self.subtasks: list[str] = [str(s) for s in subtasks.sort_values("subtask_index").index]
+        self.instructions: list[str] = _names(self.root / L.TASKS, "task", "task_index")
+        self.subtasks: list[str] = _names(self.root / L.SUBTASKS, "subtask", "subtask_index")
 
     @property
     def task(self) -> str:
@@ -137,7 +207,17 @@ class Dataset:
         """Each episode's meta/episodes row, without its statistics columns."""
         rows = []
         for e in range(self.num_episodes):
-            table = read_parquet(self.root / L.episodes_file(e))
+            path = self.root / L.episodes_file(e)
+            table = read_parquet(path)
+            if len(table) != 1:
+                raise DatasetError(f"{path}: {len(table)} rows, an episode's metadata is one")
+            for name, fits in EPISODE_COLUMNS.items():
+                if name not in table.column_names:
+                    raise DatasetError(f"{path}: no {name!r} column")
+                col = table.column(name)
+                if not fits(col.type) or col.null_count:
+                    raise DatasetError(f"{path}: {name!r} is {col.type}"
+                                       f"{' null' if col.null_count else ''}, not what a reader reads")
             table = table.select([c for c in table.column_names if not c.startswith("stats/")])
             rows.append({k: v[0] for k, v in table.to_pydict().items()})
         return rows

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 from typing import Any
+from urllib.parse import parse_qsl
 
 import numpy as np
 
@@ -81,7 +82,7 @@ class ReplayPolicy(BasePolicy):
 
 
 register_policy("expert", "the scripted expert (reads privileged simulator state)",
-                cameras=())(lambda arg, env: ExpertPolicy(env))
+                cameras=(), reads_simulator=lambda arg: True)(lambda arg, env: ExpertPolicy(env))
 register_policy("random", "uniform random joint targets", cameras=())(
     lambda arg, env: RandomPolicy(env))
 register_policy("noop", "hold the current joint positions", cameras=())(
@@ -109,8 +110,15 @@ def _mem0(arg, env):
     return Mem0Policy(arg, env)
 
 
+def _mem0_reads_simulator(arg: str | None) -> bool:
+    """gt_classifier takes the subtask boundary from the simulator, not the observation."""
+    query = dict(parse_qsl((arg or "").partition("?")[2]))
+    return "gt_classifier" in query.get("ablation", "").split(",")
+
+
 register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&execute=N&flow_steps=N]",
-                needs_argument=True, obs_type=checkpoint_obs_type)(_mem0)
+                needs_argument=True, obs_type=checkpoint_obs_type,
+                reads_simulator=_mem0_reads_simulator)(_mem0)
 
 
 def _dp(arg, env):

@@ -52,6 +52,19 @@ def read_config(folder: str | Path, policy: str | None = None) -> dict[str, Any]
     return config
 
 
+def saved_step(folder: str | Path) -> int | None:
+    """The training step of the complete checkpoint in ``folder``: its config and readable
+    weights of one step; None when either is missing, unreadable or of another step."""
+    try:
+        config = read_config(folder)
+        data = (Path(folder) / WEIGHTS).read_bytes()
+        load_bytes(data)
+        step = int(_metadata(data).get("step", -1))
+    except (CheckpointError, SafetensorError, ValueError, OSError, struct.error):
+        return None
+    return step if config.get("step") == step else None
+
+
 def load_weights(folder: str | Path, model: torch.nn.Module, step: int) -> None:
     path = Path(folder) / WEIGHTS
     try:

@@ -200,6 +200,10 @@ def image_tensors(observation: dict[str, Any], cameras: tuple[str, ...],
         if cam not in pixels:
             raise ValueError(f"the observation has no {cam!r} camera (has {sorted(pixels)})")
         frame = np.asarray(pixels[cam])
+        if frame.dtype != np.uint8 or frame.ndim != 3 or frame.shape[2] != 3:
+            # checked before resizing, which allocates floats per channel
+            raise ValueError(f"camera {cam!r}: a frame must be uint8 (H, W, 3), got "
+                             f"{frame.dtype} {frame.shape}")
         if frame.shape[:2] != tuple(size):
             frame = resize(frame[None], tuple(size))[0]
         out.append(torch.from_numpy(np.ascontiguousarray(frame)).permute(2, 0, 1)[None])
@@ -218,7 +222,10 @@ def camera_inputs(observation: dict[str, Any], cfg: ReadsObservation) -> list[to
 
 def state_tensor(observation: dict[str, Any]) -> torch.Tensor:
     """The joint state (1, 14) float32."""
-    return torch.as_tensor(np.asarray(observation["agent_pos"]), dtype=torch.float32)[None]
+    agent_pos = np.asarray(observation["agent_pos"])
+    if agent_pos.shape != (len(JOINTS),):
+        raise ValueError(f"agent_pos must have shape ({len(JOINTS)},), got {agent_pos.shape}")
+    return torch.as_tensor(agent_pos, dtype=torch.float32)[None]
 
 
 def state_inputs(observation: dict[str, Any], state_dim: int) -> list[torch.Tensor]:

@@ -39,17 +39,26 @@ class PolicyEntry:
     # the observation it reads, from its argument (a checkpoint trained on the state reads
     # "environment_state_agent_pos"); None = pixels_agent_pos
     obs_type: ObsType | None = None
+    # from its argument: whether it reads the simulator itself (the expert's privileged state,
+    # a Mem-0's ground-truth subtask boundary), which a policy server cannot give it
+    reads_simulator: Callable[[str | None], bool] | None = None
+    # from its argument: the rmbench.make options, when only the policy can say (a remote
+    # policy asks its server); supersedes cameras and obs_type
+    env_options: Callable[[str | None], dict[str, Any]] | None = None
 
 
 POLICIES: dict[str, PolicyEntry] = {}
 
 
 def register_policy(name: str, help: str, needs_argument: bool = False,
-                    cameras: tuple[str, ...] | None = None, obs_type: ObsType | None = None):
+                    cameras: tuple[str, ...] | None = None, obs_type: ObsType | None = None,
+                    reads_simulator: Callable[[str | None], bool] | None = None,
+                    env_options: Callable[[str | None], dict[str, Any]] | None = None):
     def wrap(factory: PolicyFactory) -> PolicyFactory:
         if name in POLICIES:
             raise ValueError(f"policy {name!r} is already registered")
-        POLICIES[name] = PolicyEntry(name, factory, help, needs_argument, cameras, obs_type)
+        POLICIES[name] = PolicyEntry(name, factory, help, needs_argument, cameras, obs_type,
+                                     reads_simulator, env_options)
         return factory
 
     return wrap
@@ -77,12 +86,20 @@ def env_options(spec: str) -> dict[str, Any]:
     declares (``obs_type``) and the cameras it reads; nothing is rendered for a policy that
     reads no camera."""
     entry, arg = parse_spec(spec)
+    if entry.env_options is not None:
+        return entry.env_options(arg)
     obs_type = entry.obs_type(arg) if entry.obs_type is not None else PIXELS_OBS_TYPE
     if obs_type != PIXELS_OBS_TYPE:
         return {"obs_type": obs_type}
     if entry.cameras == ():
         return {"render": False}
     return {"cameras": entry.cameras} if entry.cameras else {}
+
+
+def reads_simulator(spec: str) -> bool:
+    """Whether the policy ``spec`` names reads the simulator beyond its observation."""
+    entry, arg = parse_spec(spec)
+    return entry.reads_simulator is not None and entry.reads_simulator(arg)
 
 
 def make_policy(spec: str, env) -> Policy:

@@ -32,7 +32,13 @@ from rmbench.data.layout_shift import add_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
 from rmbench.policies.base import BasePolicy
-from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config, save_checkpoint
+from rmbench.policies.checkpoint import (
+    CheckpointError,
+    load_weights,
+    read_config,
+    save_checkpoint,
+    saved_step,
+)
 from rmbench.policies.config import PolicyConfig, parse_argument
 from rmbench.policies.feature_cache import features_key, with_features
 from rmbench.policies.nn.backbone import camera_encoders
@@ -229,7 +235,8 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
         return batch_stream(frames, sampler, start, workers)
 
     return train(trainer, batches, train_cfg, out, describe, progress,
-                 write_checkpoint=save_checkpoint, config_defaults=type(cfg)().to_dict())
+                 write_checkpoint=save_checkpoint, checkpoint_step=saved_step,
+                 config_defaults=type(cfg)().to_dict())
 
 
 class VisuomotorPolicy(BasePolicy):

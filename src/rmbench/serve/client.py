@@ -5,7 +5,9 @@ The adapter is chosen by the server's greeting: ``rmbench serve`` announces itse
 rmbench observations and reset messages; any other server is taken to be openpi's and gets the
 ALOHA layout (serve/openpi.py). ``adapter=`` overrides the guess; ``steps=N`` executes only the
 first N actions of each returned chunk before asking again (openpi's ALOHA examples replan
-after 10 to 25 of the 50).
+after 10 to 25 of the 50). An rmbench server's greeting also says what its policy reads (the
+observation type, the cameras): evaluation builds the env from it (``remote_env_options``),
+and the client sends only those entries.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 import numpy as np
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from rmbench.policies.base import BasePolicy
@@ -42,41 +45,95 @@ def parse_remote(url: str) -> tuple[str, str, int | None]:
 
 
 class RemotePolicy(BasePolicy):
+    """Exact or loud: a timeout or a broken connection closes the connection and raises, so
+    a late reply can never be taken for the answer to a later observation. The next
+    ``reset`` connects again (an rmbench server's episode starts over); an ``act`` before it
+    raises, which ends the episode as ``policy_error``. An openpi server keeps no episode
+    state, so its next ``act`` connects again."""
+
     def __init__(self, url: str, timeout: float = 60.0):
-        self.url, adapter, self.steps = parse_remote(url)
+        self.url, self.requested_adapter, self.steps = parse_remote(url)
         self.timeout = timeout
         self._stack = ExitStack()  # the connection is a context; close() leaves it
-        self.ws = self._stack.enter_context(connect(
-            self.url, max_size=MAX_MESSAGE_BYTES, open_timeout=timeout, compression=None))
-        self.metadata = unpack(self.ws.recv(timeout=timeout))
-        is_rmbench = isinstance(self.metadata, dict) and self.metadata.get("server") == "rmbench"
-        self.adapter = ("rmbench" if is_rmbench else "openpi") if adapter == "auto" else adapter
-        if self.adapter == "rmbench":
-            if not is_rmbench or self.metadata.get("protocol") != PROTOCOL:
-                raise RuntimeError(f"{self.url} is not an rmbench server of protocol {PROTOCOL} "
-                                   f"(metadata {self.metadata!r})")
-            self.cameras = tuple(self.metadata.get("cameras", ()))
-        else:
-            self.cameras = tuple(openpi.CAMERA_KEYS)
+        self.ws = None
+        self.metadata: Any = None
         self.prompt = ""
+        self._connect()
+
+    def _connect(self) -> None:
+        self.ws = self._stack.enter_context(connect(
+            self.url, max_size=MAX_MESSAGE_BYTES, open_timeout=self.timeout, compression=None))
+        try:
+            metadata = unpack(self.ws.recv(timeout=self.timeout))
+        except Exception:
+            self._disconnect()
+            raise
+        if isinstance(metadata, dict) and "error" in metadata:
+            self._disconnect()
+            raise RuntimeError(f"{self.url} refused the connection: {metadata['error']}")
+        is_rmbench = isinstance(metadata, dict) and metadata.get("server") == "rmbench"
+        adapter = (("rmbench" if is_rmbench else "openpi") if self.requested_adapter == "auto"
+                   else self.requested_adapter)
+        if adapter == "rmbench" and (not is_rmbench or metadata.get("protocol") != PROTOCOL):
+            self._disconnect()
+            raise RuntimeError(f"{self.url} is not an rmbench server of protocol {PROTOCOL} "
+                               f"(metadata {metadata!r:.200})")
+        if self.metadata is not None and metadata != self.metadata:
+            self._disconnect()
+            raise RuntimeError(f"{self.url} now serves another policy than at the first "
+                               f"connection ({metadata!r:.200})")
+        self.metadata, self.adapter = metadata, adapter
+        self.cameras = (tuple(metadata.get("cameras", ())) if adapter == "rmbench"
+                        else tuple(openpi.CAMERA_KEYS))
+        self.episode_open = False  # a reset on this connection starts the episode
+
+    def _disconnect(self) -> None:
+        self._stack.close()
+        self._stack = ExitStack()
+        self.ws = None
 
     def _call(self, msg: dict[str, Any]) -> Any:
-        self.ws.send(pack(msg))
-        raw = self.ws.recv(timeout=self.timeout)
+        if self.ws is None:
+            self._connect()
+        try:
+            self.ws.send(pack(msg))
+            raw = self.ws.recv(timeout=self.timeout)
+        except (TimeoutError, ConnectionClosed, OSError) as err:
+            # the reply may still come: only a fresh connection is sure not to read it
+            self._disconnect()
+            what = (f"no reply within {self.timeout:g} s" if isinstance(err, TimeoutError)
+                    else f"{type(err).__name__}: {err}")
+            raise RuntimeError(f"{self.url}: {what}; connection closed, the next episode "
+                               f"reconnects") from None
         return raw if isinstance(raw, str) else unpack(raw)
 
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
         self.prompt = instruction
         if self.adapter == "rmbench":
+            self.episode_open = False
             self._rmbench_reply(self._call(
                 {"reset": True, "instruction": instruction, "task_info": task_info}))
+            self.episode_open = True
 
     def act(self, observation: dict[str, Any]) -> np.ndarray:
         if self.adapter == "openpi":
             reply = self._call(openpi.observation_to_openpi(observation, self.prompt))
             return openpi.actions_from_openpi(reply, self.steps)
-        actions = np.asarray(self._rmbench_reply(self._call(observation))["actions"])
+        if self.ws is None or not self.episode_open:
+            raise RuntimeError(f"{self.url}: the connection was lost in this episode; the "
+                               f"next reset reconnects")
+        actions = np.asarray(self._rmbench_reply(self._call(self._served(observation)))["actions"])
         return actions[: self.steps] if actions.ndim == 2 else actions
+
+    def _served(self, observation: dict[str, Any]) -> dict[str, Any]:
+        """The entries of ``observation`` the server announced that its policy reads."""
+        out = {"agent_pos": observation["agent_pos"]}
+        if self.metadata.get("state_dim") is not None:
+            out["environment_state"] = observation.get("environment_state")
+        if self.cameras:
+            pixels = observation.get("pixels") or {}
+            out["pixels"] = {cam: pixels.get(cam) for cam in self.cameras}
+        return out
 
     def _rmbench_reply(self, reply: Any) -> dict[str, Any]:
         if not isinstance(reply, dict):
@@ -85,10 +142,44 @@ class RemotePolicy(BasePolicy):
             raise RuntimeError(f"server: {reply['error']}")
         return reply
 
+    def env_options(self) -> dict[str, Any]:
+        """``rmbench.make`` options for an env whose observation is what the server reads."""
+        if self.adapter == "openpi":
+            return {"cameras": tuple(openpi.CAMERA_KEYS)}
+        obs_type = self.metadata.get("obs_type", "pixels_agent_pos")
+        if not obs_type.startswith("pixels"):
+            return {"obs_type": obs_type}
+        return {"obs_type": obs_type, "cameras": self.cameras} if self.cameras else {
+            "obs_type": obs_type, "render": False}
+
     def close(self) -> None:
-        self._stack.close()
+        self._disconnect()
+
+
+def remote_env_options(arg: str | None) -> dict[str, Any]:
+    """What the served policy reads, from the server's greeting (one short connection)."""
+    policy = RemotePolicy(arg or "", timeout=30.0)
+    try:
+        return policy.env_options()
+    finally:
+        policy.close()
+
+
+def _remote(arg: str | None, env) -> RemotePolicy:
+    policy = RemotePolicy(arg or "")
+    if env is not None and policy.adapter == "rmbench":
+        u = env.unwrapped
+        task = type(u.task).name
+        if task != policy.metadata.get("task"):
+            policy.close()
+            raise ValueError(f"{policy.url} serves {policy.metadata.get('task')!r}, not {task!r}")
+        if policy.metadata.get("state_dim") is not None and not u.with_state:
+            policy.close()
+            raise ValueError(f"{policy.url} reads environment_state: make the env with "
+                             f"obs_type={policy.metadata.get('obs_type')!r}")
+    return policy
 
 
 register_policy("remote", "a policy behind a websocket: rmbench serve, or openpi's server "
-                "(?adapter=openpi, ?steps=N)", needs_argument=True)(
-    lambda arg, env: RemotePolicy(arg))
+                "(?adapter=openpi, ?steps=N)", needs_argument=True,
+                env_options=remote_env_options)(_remote)

@@ -11,7 +11,10 @@ atomically; it is the commit point. A re-run with the same arguments continues f
 batches being a function of the step, gives the weights an uninterrupted run gives.
 ``OUT/model.safetensors`` + ``OUT/config.json`` (the inference checkpoint, written by the
 function the policy passes: its format is the policies', and training sits below them) and
-``OUT/training/loss.csv`` / ``loss.png`` are derived from it. Under torchrun each rank trains on
+``OUT/training/loss.csv`` / ``loss.png`` are derived from it. Each save writes the checkpoint
+before the state, so a kill at any instant of a save leaves a state that re-runs the save;
+a re-run that finds the training done but its checkpoint missing or torn (``checkpoint_step``
+disagrees with the state) writes it again from the state. Under torchrun each rank trains on
 its own episode stream and rank 0 writes.
 
 The state also counts the wall time of the steps it holds, over every piece that saved them
@@ -143,15 +146,19 @@ BatchSource = Callable[[int, int, int], Iterator[dict[str, torch.Tensor]]]
 # (folder, model to export, describe, step) -> None: writes the inference checkpoint
 # (rmbench.policies.checkpoint.save_checkpoint)
 CheckpointWriter = Callable[[Path, nn.Module, dict[str, Any], int], None]
+# folder -> the step of the complete checkpoint it holds, None if missing or torn
+# (rmbench.policies.checkpoint.saved_step)
+CheckpointStep = Callable[[Path], "int | None"]
 
 
 def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | Path,
           describe: dict[str, Any], progress: bool = True, *,
-          write_checkpoint: CheckpointWriter,
+          write_checkpoint: CheckpointWriter, checkpoint_step: CheckpointStep | None = None,
           config_defaults: dict[str, Any] | None = None) -> dict[str, Any]:
     """Train ``model`` for ``cfg.steps`` steps into ``out``; ``describe`` is what the
     inference checkpoint's config.json holds (and what a resume must match), and
-    ``write_checkpoint`` writes that checkpoint at each save. ``config_defaults``: the
+    ``write_checkpoint`` writes that checkpoint at each save; ``checkpoint_step`` reads the
+    step of the one ``out`` holds, to repair it when the training is done. ``config_defaults``: the
     defaults of the policy config in ``describe["config"]``; a run saved before a field
     existed ran with its default, so it resumes when that default is asked for."""
     out = Path(out)
@@ -176,6 +183,10 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     start = kept.step
     if start >= cfg.steps:
         log.info("%s: already trained for %d steps", out, start)
+        if dist.rank == 0 and checkpoint_step is not None and checkpoint_step(out) != start:
+            log.warning("%s: the checkpoint of step %d is missing or torn: written again from "
+                        "the training state", out, start)
+            _export(out, model, identity, start, write_checkpoint)
         return {"steps": start, "resumed_from": start, **kept.timing()}
     here = describe_machine()
     if device.type == "cuda":
@@ -241,10 +252,17 @@ def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dic
     buf = io.BytesIO()
     torch.save(state, buf)
     _append_curve(out, rows, step)
+    # the checkpoint before the state that says it is written: a kill in between re-runs this
+    # save, never leaves a finished training with an older or torn checkpoint
+    _export(out, model, identity, step, write_checkpoint)
     write_atomic(out / STATE, buf.getvalue())  # the commit point
+    _plot_curve(out)
+
+
+def _export(out: Path, model: nn.Module, identity: dict, step: int,
+            write_checkpoint: CheckpointWriter) -> None:
     export = model.export_module() if hasattr(model, "export_module") else model
     write_checkpoint(out, export, identity["describe"], step)
-    _plot_curve(out)
 
 
 def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict,

@@ -20,7 +20,7 @@ from rmbench.data.layout_shift import add_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
 from rmbench.policies.action_space import EE_DIM, EEActions
-from rmbench.policies.checkpoint import save_checkpoint
+from rmbench.policies.checkpoint import save_checkpoint, saved_step
 from rmbench.policies.feature_cache import FeatureCache, with_features
 from rmbench.policies.mem0.classifier import end_labels
 from rmbench.policies.mem0.config import Mem0Config
@@ -134,7 +134,8 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         return batch_stream(frames, sampler, start, workers)
 
     result = train(trainer, batches, train_cfg, out, describe, progress,
-                   write_checkpoint=save_checkpoint, config_defaults=type(cfg)().to_dict())
+                   write_checkpoint=save_checkpoint, checkpoint_step=saved_step,
+                   config_defaults=type(cfg)().to_dict())
     if planner_report is not None:
         write_atomic(out / "training" / "planner.json",
                      (json.dumps(planner_report, indent=2) + "\n").encode())

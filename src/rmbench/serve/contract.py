@@ -1,0 +1,122 @@
+"""What a served policy reads, announced in the server's greeting, and each client message
+checked against it before any work is done.
+
+An observation may hold exactly the entries the policy reads: ``agent_pos`` float (14,);
+``pixels`` with exactly the policy's cameras, each uint8 (H, W, 3) no larger than
+``frame_max``; ``environment_state`` float (D,) with D the task's state length. The largest
+such message sizes the websocket's message cap. A reset may hold an instruction and the
+task's facts, of the types the environment gives them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from rmbench.serve.wire import Limits, WireError
+from rmbench.sim.simulator import ACTION_DIM
+
+FRAME_MAX = (480, 640)  # (H, W): VGA, twice the env's default 240x320
+MAX_TEXT = 4096  # an instruction, a subtask's name
+ENVELOPE_BYTES = 64 * 2**10  # keys, headers and a reset's task facts around the arrays
+# the task facts a reset may carry (run_policy_episode's task_info) and their types
+TASK_INFO = {"task": str, "gym_id": str, "tmc": str, "step_limit": int, "subtasks": list,
+             "seed": int, "instruction": str}
+
+
+@dataclass(frozen=True)
+class Contract:
+    task: str
+    obs_type: str
+    cameras: tuple[str, ...]
+    state_dim: int | None  # None: the policy reads no environment_state
+    frame_max: tuple[int, int] = FRAME_MAX
+
+    def __post_init__(self):
+        if len(self.frame_max) != 2 or min(self.frame_max) < 1:
+            raise ValueError(f"frame_max must be (H, W) >= 1, got {self.frame_max}")
+
+    @property
+    def max_message_bytes(self) -> int:
+        """The largest legal message: every camera's frame at ``frame_max``, the states, and
+        room for the keys, headers and a reset's facts."""
+        h, w = self.frame_max
+        return (len(self.cameras) * h * w * 3 + 8 * (ACTION_DIM + (self.state_dim or 0))
+                + ENVELOPE_BYTES)
+
+    @property
+    def limits(self) -> Limits:
+        return Limits(bytes=self.max_message_bytes, items=1024, depth=6, text=MAX_TEXT)
+
+    def greeting(self) -> dict[str, Any]:
+        return {"obs_type": self.obs_type, "cameras": list(self.cameras),
+                "frame_max": list(self.frame_max), "state_dim": self.state_dim,
+                "max_message_bytes": self.max_message_bytes}
+
+    def check_observation(self, msg: dict) -> dict[str, Any]:
+        """``msg`` if it holds what the policy reads and nothing else, else a WireError."""
+        allowed = {"agent_pos"} | ({"pixels"} if self.cameras else set()) | (
+            {"environment_state"} if self.state_dim is not None else set())
+        extra = [k for k in msg if k not in allowed]
+        if extra:
+            raise WireError(f"unexpected entries {sorted(map(str, extra))[:4]}; this policy "
+                            f"reads {sorted(allowed)}")
+        missing = sorted(allowed - set(msg))
+        if missing:
+            raise WireError(f"the observation lacks {missing}")
+        _vector(msg["agent_pos"], "agent_pos", ACTION_DIM)
+        if self.state_dim is not None:
+            _vector(msg["environment_state"], "environment_state", self.state_dim)
+        if self.cameras:
+            pixels = msg["pixels"]
+            if not isinstance(pixels, dict) or set(pixels) != set(self.cameras):
+                got = sorted(map(str, pixels)) if isinstance(pixels, dict) else type(pixels).__name__
+                raise WireError(f"pixels must hold exactly the cameras {list(self.cameras)}, "
+                                f"got {got}")
+            for cam, frame in pixels.items():
+                self._frame(cam, frame)
+        return msg
+
+    def _frame(self, cam: str, frame) -> None:
+        h, w = self.frame_max
+        if (not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim != 3
+                or frame.shape[2] != 3 or not 1 <= frame.shape[0] <= h
+                or not 1 <= frame.shape[1] <= w):
+            what = (f"{frame.dtype} {frame.shape}" if isinstance(frame, np.ndarray)
+                    else type(frame).__name__)
+            raise WireError(f"camera {cam!r}: a frame must be uint8 (H, W, 3) within "
+                            f"{h}x{w}, got {what}")
+
+    def check_reset(self, msg: dict) -> tuple[str, dict[str, Any]]:
+        """(instruction, task facts) of a reset message, or a WireError."""
+        instruction = msg.get("instruction", "")
+        if not isinstance(instruction, str):
+            raise WireError("a reset's instruction must be a string")
+        info = msg.get("task_info") or {}
+        if not isinstance(info, dict):
+            raise WireError("a reset's task_info must be a map")
+        for key, value in info.items():
+            kind = TASK_INFO.get(key)
+            if kind is None:
+                raise WireError(f"unknown task_info entry {str(key)[:40]!r}; entries: "
+                                f"{', '.join(TASK_INFO)}")
+            if type(value) is not kind:
+                raise WireError(f"task_info {key} must be {kind.__name__}, got "
+                                f"{type(value).__name__}")
+        if "task" in info and info["task"] != self.task:
+            raise WireError(f"this server serves {self.task!r}, not {info['task'][:40]!r}")
+        if "seed" in info and not 0 <= info["seed"] < 2**63:
+            raise WireError(f"task_info seed must be in [0, 2**63), got {info['seed']}")
+        if not all(isinstance(s, str) for s in info.get("subtasks", ())):
+            raise WireError("task_info subtasks must be strings")
+        return instruction, info
+
+
+def _vector(value, name: str, length: int) -> None:
+    if (not isinstance(value, np.ndarray) or value.dtype.kind != "f" or value.shape != (length,)
+            or not np.isfinite(value).all()):
+        what = (f"{value.dtype} {value.shape}" if isinstance(value, np.ndarray)
+                else type(value).__name__)
+        raise WireError(f"{name} must be finite float ({length},), got {what}")

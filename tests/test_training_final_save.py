@@ -1,0 +1,134 @@
+"""A training killed at any instant of its final save resumes to the checkpoint an
+uninterrupted run writes; one found done with its checkpoint missing or torn writes it again."""
+
+import itertools
+import json
+
+import pytest
+import torch
+from safetensors.torch import load_file
+from torch import nn
+
+from rmbench.policies import checkpoint
+from rmbench.policies.checkpoint import save_checkpoint, saved_step
+from rmbench.training import loop
+from rmbench.training.loop import TrainConfig, train
+
+STEPS, SAVE_EVERY = 6, 4  # saves at 4 and 6: a kill in the final save resumes from 4
+
+
+class Line(nn.Module):
+    """A linear regression: a model the loop trains in milliseconds."""
+
+    def __init__(self):
+        super().__init__()
+        torch.manual_seed(0)
+        self.lin = nn.Linear(3, 1)
+
+    def forward(self, batch):
+        return ((self.lin(batch["x"]) - batch["y"]) ** 2).mean(), {}
+
+    def param_groups(self):
+        return [{"name": "all", "params": list(self.parameters()), "lr": 1e-2, "min_lr": 1e-3}]
+
+
+def batches(start, rank, world):
+    for step in itertools.count(start):  # a function of the step, as the loop requires
+        x = torch.randn(8, 3, generator=torch.Generator().manual_seed(step))
+        yield {"x": x, "y": x.sum(1, keepdim=True)}
+
+
+def run(out):
+    return train(Line(), batches, TrainConfig(steps=STEPS, save_every=SAVE_EVERY, log_every=1),
+                 out, {"policy": "line"}, progress=False, write_checkpoint=save_checkpoint,
+                 checkpoint_step=saved_step)
+
+
+class Killed(BaseException):
+    """What a SIGKILL leaves: the files as they are at that instant, nothing after."""
+
+
+def checkpoint_of(out):
+    return load_file(out / "model.safetensors"), json.loads((out / "config.json").read_text())
+
+
+def same_checkpoint(a, b):
+    (wa, ca), (wb, cb) = checkpoint_of(a), checkpoint_of(b)
+    assert ca == cb and wa.keys() == wb.keys()
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("final") / "uninterrupted"
+    run(out)
+    return out
+
+
+def final_save_writes(monkeypatch, die_after: int | None) -> list[str]:
+    """Patches the loop so that its final save dies after ``die_after`` of its file writes
+    (None: never); returns the list the final save's writes are named in."""
+    writes: list[str] = []
+    final = {"on": False}
+    save, write = loop._save, loop.write_atomic
+
+    def tracked_save(out, model, opt, identity, kept, *args):
+        final["on"] = kept.step == STEPS
+        save(out, model, opt, identity, kept, *args)
+
+    def tracked_write(path, data):
+        if final["on"] and die_after is not None and len(writes) == die_after:
+            raise Killed
+        write(path, data)
+        if final["on"]:
+            writes.append(path.name)
+
+    monkeypatch.setattr(loop, "_save", tracked_save)
+    monkeypatch.setattr(loop, "write_atomic", tracked_write)
+    monkeypatch.setattr(checkpoint, "write_atomic", tracked_write)
+    return writes
+
+
+def test_the_final_save_writes_the_checkpoint_before_the_state(tmp_path, monkeypatch):
+    writes = final_save_writes(monkeypatch, None)
+    run(tmp_path / "r")
+    assert writes.index("config.json") < writes.index("state.pt")
+    assert writes.index("model.safetensors") < writes.index("state.pt")
+
+
+@pytest.mark.parametrize("die_after", range(6))  # loss.csv, weights, config, state, loss.png
+def test_a_kill_inside_the_final_save_resumes_to_the_uninterrupted_checkpoint(
+        reference, tmp_path, monkeypatch, die_after):
+    out = tmp_path / "killed"
+    writes = final_save_writes(monkeypatch, die_after)
+    if die_after < 5:
+        with pytest.raises(Killed):
+            run(out)
+        assert len(writes) == die_after  # killed inside the final save, its work unfinished
+    else:
+        run(out)
+    monkeypatch.undo()
+    result = run(out)
+    assert result["resumed_from"] == (STEPS if die_after >= 4 else SAVE_EVERY)
+    same_checkpoint(out, reference)
+    assert saved_step(out) == STEPS
+
+
+@pytest.mark.parametrize("damage", ["missing weights", "missing config", "torn pair"])
+def test_a_finished_training_rewrites_a_missing_or_torn_checkpoint(reference, tmp_path, damage):
+    import shutil
+
+    out = tmp_path / "done"
+    shutil.copytree(reference, out)
+    if damage == "missing weights":
+        (out / "model.safetensors").unlink()
+    elif damage == "missing config":
+        (out / "config.json").unlink()
+    else:  # the weights of the save before beside the final config, as the old order left
+        weights = load_file(out / "model.safetensors")
+        from safetensors.torch import save_file
+        save_file({k: v + 1 for k, v in weights.items()}, out / "model.safetensors",
+                  metadata={"step": str(SAVE_EVERY)})
+    assert saved_step(out) is None
+    assert run(out)["resumed_from"] == STEPS  # nothing is trained again
+    same_checkpoint(out, reference)
