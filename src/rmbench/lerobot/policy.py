@@ -13,6 +13,7 @@ Registering the spec imports nothing of LeRobot; building the policy does.
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 from typing import Any
@@ -68,6 +69,15 @@ class LeRobotPolicy(BasePolicy):
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
         self.instruction = instruction
         self.policy.reset()
+
+    def fork(self) -> LeRobotPolicy:
+        """A copy for another connection of the policy server: the same weights, its own
+        episode state. LeRobot keeps a policy's action queues on the policy module, and its
+        ``reset`` binds new ones, so a shallow copy of the module is enough (ACT's temporal
+        ensembler, when configured, is one object the copies share)."""
+        other = copy.copy(self)
+        other.policy = copy.copy(self.policy)
+        return other
 
     def act(self, observation: dict[str, Any]) -> np.ndarray:
         torch = self.torch
