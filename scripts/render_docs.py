@@ -165,6 +165,27 @@ def state_differences() -> str:
     return "\n".join(lines) + "\n"
 
 
+def mn_recipe() -> str:
+    """Mem-0's M(n) recipe candidates (``benchmarks/mn_recipe.py``) beside the table's own
+    cells of the rows they touch: each cell a rate with its interval, and for Mem-0 where its
+    classifier declared the subtask ends against the simulator (``rmbench boundaries``)."""
+    res, doc = load("table_state.json"), load("mn_recipe.json")
+    tasks = [t.name for t in ordered() if any(t.name in c["cells"] for c in doc["candidates"])]
+    specs = ["mem0", "mem0:no_key", "mem0:gt_classifier"]
+    rows = []
+    for cand in [{"name": "the table's (format 1 data)", "cells": res["cells"]}, *doc["candidates"]]:
+        for task in tasks:
+            row = cand["cells"].get(task)
+            if row is None:
+                continue
+            ends = (row.get("mem0") or {}).get("boundaries")
+            rows.append([cand["name"], task, *(rate(row.get(s)) for s in specs),
+                         "—" if not ends else "/".join(str(ends[v]) for v in
+                                                       ("on_time", "early", "late", "missed", "false"))])
+    return markdown(["recipe", "task", "Mem-0", "`no_key`", "`gt_classifier`",
+                     "Mem-0's ends: on time/early/late/missed/false"], rows)
+
+
 def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
     rows = []
     for task in ordered():
@@ -429,6 +450,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "tasks": tasks,
     "readme-results": readme_results, "state-policies": state_policies,
     "state-ablations": state_ablations, "state-differences": state_differences,
+    "mn-recipe": mn_recipe,
     "state-records": state_records,
     "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,
     "learning-state": learning_state, "learning-state-more": learning_state_more,
