@@ -186,6 +186,24 @@ def mn_recipe() -> str:
                      "Mem-0's ends: on time/early/late/missed/false"], rows)
 
 
+def memory_probe() -> str:
+    """Each measured memory probe (``benchmarks/memory_probe.py``): the policy's rate without
+    and with its memory reset at the aliasing moment, the drop, and its memoryless control."""
+    rows = []
+    for path in sorted(RESULTS.glob("memory_probe_*.json")):
+        r = json.loads(path.read_text())
+        ref, d = r["reference"], r["with_minus_reference"]
+        drop = (f"{100 * r['drop']:+.0f} [{100 * r['drop_ci95'][0]:+.0f}, "
+                f"{100 * r['drop_ci95'][1]:+.0f}]")
+        rows.append([r["task"], r["probe"], rate(r["without"] | {"episodes": r["episodes"]}),
+                     rate(r["with"] | {"episodes": r["episodes"]}), drop,
+                     f"{COLUMN.get(ref['cell'], ref['cell'])} {rate(ref)}",
+                     f"{100 * d['difference']:+.0f} [{100 * d['ci95'][0]:+.0f}, "
+                     f"{100 * d['ci95'][1]:+.0f}]", f"`{path.name}`"])
+    return markdown(["task", "reset at", "without", "with", "drop", "memoryless control",
+                     "with − control", "results"], rows)
+
+
 def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
     rows = []
     for task in ordered():
@@ -450,7 +468,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "tasks": tasks,
     "readme-results": readme_results, "state-policies": state_policies,
     "state-ablations": state_ablations, "state-differences": state_differences,
-    "mn-recipe": mn_recipe,
+    "mn-recipe": mn_recipe, "memory-probe": memory_probe,
     "state-records": state_records,
     "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,
     "learning-state": learning_state, "learning-state-more": learning_state_more,

@@ -32,3 +32,13 @@ def test_summary_counts_verdicts_and_first_wrong():
     assert (s["on_time"], s["early"], s["missed"]) == (2, 1, 1)
     assert s["first_wrong"] == {"early": 1} and s["median_delay"] == 0.0
     assert summarize([{"events": [[0, "task", "subtask_step", 0]]}]) is None  # no policy ends
+
+
+def test_the_step_that_ends_the_episode_needs_no_declared_end():
+    # a success is counted on the episode's last frame: no policy acts after it
+    counted, declared = [40, 100], [40]
+    assert [e["verdict"] for e in classify(counted, declared, last_frame=100)] == ["on_time"]
+    assert [e["verdict"] for e in classify(counted, declared, last_frame=150)] == [
+        "on_time", "missed"]
+    s = summarize([{"steps": 101, "events": events([41, 101], [40])}])
+    assert (s["on_time"], s["missed"]) == (1, 0)

@@ -10,7 +10,8 @@ counted, and the pair classified:
 - ``early``: declared before the simulator counted the step (the next subtask starts on an
   unfinished one);
 - ``late``: more than ``LATE`` steps after (the executor keeps working on a finished step);
-- ``missed``: a step the simulator counted with no end declared by the episode's end;
+- ``missed``: a step the simulator counted with no end declared by the episode's end (not
+  the step whose count ended the episode: no policy acts after it);
 - ``false``: an end declared beyond every step the simulator counted.
 
 A step's last frame is the one whose action the simulator counted it after; the
@@ -48,12 +49,16 @@ def end_steps(events: list[list]) -> tuple[list[int], list[int]]:
     return counted, declared
 
 
-def classify(counted: list[int], declared: list[int]) -> list[dict[str, Any]]:
-    """One entry per plan step or declared end: its index, the two frames, the verdict."""
+def classify(counted: list[int], declared: list[int],
+             last_frame: int | None = None) -> list[dict[str, Any]]:
+    """One entry per plan step or declared end: its index, the two frames, the verdict. A
+    step counted on ``last_frame`` (the episode's) with no declared end is left out."""
     out = []
     for i in range(max(len(counted), len(declared))):
         s = counted[i] if i < len(counted) else None
         d = declared[i] if i < len(declared) else None
+        if d is None and s is not None and s == last_frame:
+            continue
         if d is None:
             verdict = "missed"
         elif s is None:
@@ -79,7 +84,8 @@ def summarize(records: list[dict]) -> dict[str, Any] | None:
     first_wrong: Counter = Counter()
     delays = []
     for r in records:
-        entries = classify(*end_steps(r.get("events", [])))
+        last = r["steps"] - 1 if r.get("steps") else None
+        entries = classify(*end_steps(r.get("events", [])), last_frame=last)
         counts.update(e["verdict"] for e in entries)
         delays += [e["delay"] for e in entries if e["delay"] is not None]
         wrong = next((e for e in entries if e["verdict"] != "on_time"), None)
