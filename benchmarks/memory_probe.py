@@ -22,6 +22,7 @@ import sys
 from pathlib import Path
 
 from rmbench.eval.intervals import difference, outside_noise, wilson
+from rmbench.eval.report import Rate
 from rmbench.machine import describe
 from rmbench.video import write_atomic
 
@@ -33,8 +34,7 @@ def reference_cell(path: Path, task: str, cell: str) -> dict:
     if not row:
         raise SystemExit(f"{path}: no {cell} cell for {task}")
     n = row["episodes"]
-    return {"source": str(path), "cell": cell, "episodes": n,
-            "successes": row.get("successes", round(row["success_rate"] * n)),
+    return {"source": str(path), "cell": cell, "episodes": n, "successes": Rate.of(row).successes,
             "success_rate": row["success_rate"]}
 
 

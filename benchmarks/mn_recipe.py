@@ -21,6 +21,7 @@ from pathlib import Path
 from rmbench.eval.boundaries import summarize
 from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
+from rmbench.eval.report import Rate
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "mn_recipe.json"
@@ -30,9 +31,9 @@ KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress"
 
 def cell(row: dict, task: str) -> dict:
     out = {k: row.get(k) for k in KEEP}
-    n = row["episodes"]  # a row written before rates carried their counts has the rate alone
-    out["successes"] = row.get("successes", round(row["success_rate"] * n))
-    out["success_ci95"] = [round(v, 4) for v in wilson(out["successes"], n)]
+    rate = Rate.of(row)  # a row written before rates carried their counts has the rate alone
+    out["successes"] = rate.successes
+    out["success_ci95"] = [round(v, 4) for v in wilson(rate.successes, rate.episodes)]
     out["boundaries"] = summarize(read_records(Path(row["evaluation"]) / task / "episodes.jsonl"))
     planner = Path(row["checkpoint"]) / "training" / "planner.json"  # M(n) checkpoints only
     out["planner"] = json.loads(planner.read_text()) if planner.exists() else None

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from rmbench.eval.chance import chance
 from rmbench.eval.intervals import format_rate
-from rmbench.eval.report import PUBLISHED
+from rmbench.eval.report import PUBLISHED, Rate
 from rmbench.suite.plan import applies
 from rmbench.suite.tables import PUBLISHED_ABLATIONS, difference_table, differences
 from rmbench.tasks.registry import ordered
@@ -50,8 +50,8 @@ def rate(cell: dict | None) -> str:
     """'85 [77, 91]': successes in percent with the Wilson 95% interval; '—' if not measured."""
     if cell is None:
         return "—"
-    k = cell["successes"] if "successes" in cell else round(cell["success_rate"] * cell["episodes"])
-    return format_rate(k, cell["episodes"])
+    r = Rate.of(cell)
+    return format_rate(r.successes, r.episodes)
 
 
 def minutes(seconds: float | None) -> str:

@@ -52,6 +52,9 @@ class LeRobotPolicy(BasePolicy):
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
         self.torch, self.preprocess = torch, preprocess_observation
+        # a local folder with its config.json (a one-line error otherwise): LeRobot's
+        # from_pretrained then loads from disk and never looks a name up on a hub
+        inputs = checkpoint_inputs(path)
         cfg = PreTrainedConfig.from_pretrained(path)
         cfg.pretrained_path, cfg.device = path, device
         self.policy = get_policy_class(cfg.type).from_pretrained(path, config=cfg)
@@ -59,7 +62,6 @@ class LeRobotPolicy(BasePolicy):
         self.pre, self.post = make_pre_post_processors(
             cfg, pretrained_path=path,
             preprocessor_overrides={"device_processor": {"device": device}})
-        inputs = checkpoint_inputs(path)
         # (C, H, W) of each camera the checkpoint reads
         self.images = {k[len(IMAGE_PREFIX):]: tuple(v["shape"]) for k, v in inputs.items()
                        if k.startswith(IMAGE_PREFIX)}
