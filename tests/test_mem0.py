@@ -608,7 +608,7 @@ def test_temporal_ensemble_averages_the_chunks_that_cover_a_step(mn_state_ckpt):
         return np.full((length, 14), float(len(asked)))
 
     policy.chunk = chunk
-    policy.ended = lambda c: False
+    policy.ended = lambda c, z: False
     out = [policy.act(obs)[0] for _ in range(horizon + 1)]
     assert asked == [(t, horizon) for t in range(0, horizon + 1, 3)]
     w = np.exp(-0.5 * np.arange(3))

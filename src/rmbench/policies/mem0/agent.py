@@ -26,7 +26,7 @@ from rmbench.policies.config import parse_argument
 from rmbench.policies.ensemble import TemporalEnsemble
 from rmbench.policies.mem0.classifier import Debounce
 from rmbench.policies.mem0.config import TRAINED_ABLATIONS, Mem0Config
-from rmbench.policies.mem0.memory import MemoryStore
+from rmbench.policies.mem0.memory import EventWindow, MemoryStore
 from rmbench.policies.mem0.planner import DONE
 from rmbench.policies.mem0.train import build_model, goal_text
 from rmbench.policies.nn.inference import inference
@@ -97,6 +97,7 @@ class Mem0Policy(BasePolicy):
         cfg = self.cfg
         self.generator = torch.Generator().manual_seed(int(task_info.get("seed", 0)))
         self.memory = MemoryStore(1, cfg.step_tokens, cfg.sliding_window, cfg.dim)
+        self.events = EventWindow(1, cfg.event_window, cfg.dim)
         self.debounce = Debounce(cfg.end_window)
         self.t = 0
         self.subtask_t = 0  # steps since the subtask began: the sliding window's phase
@@ -118,6 +119,8 @@ class Mem0Policy(BasePolicy):
         cfg, ex = self.cfg, self.model.executor
         inputs = self.inputs(observation)
         tokens, z = ex.encode(inputs)
+        if self.t == 0:
+            self.events.reset(torch.ones(1, dtype=torch.bool), z)
         if self.t == 0 and self.decompose:
             self.first = self.model.planner.embed(self.planner_inputs(inputs))
             self.subtask = self.plan(self.first)
@@ -145,8 +148,12 @@ class Mem0Policy(BasePolicy):
             if not self.queue:
                 self.queue = list(self.chunk(c, observation, cfg.execute))
             action = self.queue.pop(0)
-        if self.decompose and not cfg.gt_classifier and self.ended(c):
+        if self.decompose and not cfg.gt_classifier and self.ended(c, z):
             self.subtask_ended(inputs)
+        # The event window is filled on the episode's phase, as training walks it: the
+        # classifier compares each step with the last entries, whichever subtask wrote them.
+        if self.t % cfg.memory_every == 0:
+            self.events.push(z)
         self.t += 1
         self.subtask_t += 1
         return action
@@ -180,9 +187,9 @@ class Mem0Policy(BasePolicy):
         """The planner's share of the step's inputs: its cameras' images, or the states."""
         return inputs if self.planner_cams is None else [inputs[i] for i in self.planner_cams]
 
-    def ended(self, c: torch.Tensor) -> bool:
+    def ended(self, c: torch.Tensor, z: torch.Tensor) -> bool:
         """The end classifier's debounced verdict on this step."""
-        p = torch.sigmoid(self.model.executor.end_logit(c))[0].item()
+        p = torch.sigmoid(self.model.executor.end_logit(c, z, self.events))[0].item()
         return self.debounce.update(p > self.cfg.end_threshold)
 
     def subtask_ended(self, inputs: list[torch.Tensor]) -> None:

@@ -1,6 +1,8 @@
-"""The subtask-end rule: a subtask ends after L consecutive steps the classifier calls
-positive (one noisy positive does not end it); training labels the last L frames of each
-subtask positive, so at run time the count reaches L as the subtask finishes."""
+"""The subtask-end rule and the classifier's labels: a subtask ends after L consecutive steps
+the classifier calls positive (one noisy positive does not end it). The "context" classifier's
+positives are the last L frames of each subtask, so the count reaches L as it finishes; the
+"event" classifier's are the frames just after each step ends, so the count reaches L that
+many frames after the end it detects."""
 
 from __future__ import annotations
 
@@ -33,3 +35,13 @@ def end_labels(subtask_step: np.ndarray, window: int) -> np.ndarray:
     for t in range(n - 2, -1, -1):
         to_end[t] = to_end[t + 1] + 1 if subtask_step[t] == subtask_step[t + 1] else 0
     return to_end < window
+
+
+def event_labels(subtask_step: np.ndarray, span: int) -> np.ndarray:
+    """(T,) bool: frame t is one of the first ``span`` frames after a plan step ended (the
+    frames from the next step's first on, whose observations show the end happened)."""
+    step = np.asarray(subtask_step)
+    since = np.full(len(step), span, dtype=np.int64)  # frames since the last end, capped
+    for t in range(1, len(step)):
+        since[t] = 0 if step[t] != step[t - 1] else min(since[t - 1] + 1, span)
+    return since < span

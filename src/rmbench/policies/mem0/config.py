@@ -14,6 +14,7 @@ from rmbench.policies.observation import ReadsObservation, check_observation
 TRAINED_ABLATIONS = ("no_anchor", "no_sliding", "no_memory", "no_key")
 INFERENCE_ABLATIONS = ("gt_classifier",)
 ABLATIONS = TRAINED_ABLATIONS + INFERENCE_ABLATIONS
+END_CLASSIFIERS = ("event", "context")
 
 
 @dataclass(frozen=True)
@@ -107,9 +108,21 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     """With temporal_ensemble: steps between chunks (1 as in ACT; more costs less inference
     and averages fewer predictions)."""
     # --- end classifier
+    end_classifier: str = "event"
+    """What the subtask-end classifier reads and learns. "event": the current z_img and the
+    event window (the last ``event_window`` z_img at the memory stride, kept across subtasks),
+    positive on the frames just after each plan step ends (``end_span``): it detects that a
+    step has ended from what changed. "context": the publication's MLP on c_t, positive on the
+    last L frames of each subtask: it predicts the end before it happens, and c_t's sliding
+    memory fills with the subtask's age, so a classifier on it can learn a clock (measured on
+    press_button: it fired a median 32 steps before each push when the policy was slower
+    than the demonstrations)."""
+    event_window: int = 4
+    """With end_classifier "event": z_img entries in the event window (4 at stride 5: 1 s)."""
     end_window: int = 8
-    """L: a subtask ends after L consecutive positive steps; the last L frames of each
-    subtask are the classifier's positives in training."""
+    """L: a subtask ends after L consecutive positive steps. With end_classifier "context" the
+    last L frames of each subtask are the positives; with "event" the ``end_span`` frames
+    after each step's end."""
     end_threshold: float = 0.5
     classifier_weight: float = 1.0
     """Weight of the end classifier's loss beside the action loss."""
@@ -195,9 +208,25 @@ class Mem0Config(ReadsObservation, PolicyConfig):
         if self.action_space != "joints" and self.relative_actions:
             raise ValueError(f"relative_actions are offsets from the joints: with action_space "
                              f"{self.action_space!r} set relative_actions=false")
-        for name in ("sliding_window", "memory_every", "end_window", "flow_steps", "head_layers"):
+        if self.end_classifier not in END_CLASSIFIERS:
+            raise ValueError(f"end_classifier must be one of {END_CLASSIFIERS}, got "
+                             f"{self.end_classifier!r}")
+        for name in ("sliding_window", "memory_every", "end_window", "flow_steps", "head_layers",
+                     "event_window"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1")
+
+    @property
+    def end_span(self) -> int:
+        """With end_classifier "event": frames labelled positive after each step's end, 1.5 L.
+        Longer than L, so one missed frame still leaves L in a row; shorter than 2 L, so the
+        debounce, reset when it fires, cannot declare the same end twice."""
+        return self.end_window + self.end_window // 2
+
+    @classmethod
+    def from_dict(cls, raw):
+        # checkpoints written before end_classifier existed trained the "context" classifier
+        return super().from_dict({"end_classifier": "context", **raw})
 
     @property
     def action_dim(self) -> int:

@@ -51,6 +51,32 @@ class MemoryStore(nn.Module):
             getattr(self, k).copy_(v)
 
 
+class EventWindow(nn.Module):
+    """Per slot, the last W z_img at the memory stride, kept across subtask ends: what the
+    "event" end classifier compares the current frame with. An episode's start fills it with
+    its first frame, as if the scene had stood still before it. Buffers, like MemoryStore."""
+
+    def __init__(self, slots: int, window: int, dim: int):
+        super().__init__()
+        self.register_buffer("entries", torch.zeros(slots, window, dim), persistent=False)
+
+    def reset(self, which: torch.Tensor, z: torch.Tensor) -> None:
+        """Start an episode in the slots where ``which`` (B,) is set: every entry is ``z``."""
+        which = which.to(self.entries.device)
+        if which.any():
+            self.entries[which] = z.detach()[which, None].expand(-1, self.entries.shape[1], -1)
+
+    def push(self, z: torch.Tensor) -> None:
+        """Append ``z`` (B, d) as the newest entry; the oldest drops out."""
+        self.entries.copy_(torch.cat([self.entries[:, 1:], z.detach()[:, None]], 1))
+
+    def state(self) -> dict[str, torch.Tensor]:
+        return {"entries": self.entries}
+
+    def load_state(self, state: dict[str, torch.Tensor]) -> None:
+        self.entries.copy_(state["entries"])
+
+
 class MemoryFusion(nn.Module):
     """z' = z + Attn(z, [z; memory]) followed by a feed-forward residual (pre-norm).
 

@@ -7,7 +7,9 @@ head and subtask-end classifier.
     a_t      = Fuse_A(z_img, anchor tokens)          (z_img with no_anchor / no_memory)
     s_t      = Fuse_S(z_img, last K z_img)           (z_img with no_sliding / no_memory)
     c_t      = [a_t; s_t; z_text]
-    actions  ~ FlowHead(c_t, state)                  P(end) = MLP(c_t)
+    actions  ~ FlowHead(c_t, state)
+    P(end)   = MLP([z_img; event window])            ("event": the last W z_img, kept across
+             = MLP(c_t)                               subtasks; "context": as published)
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from rmbench.data import layout as L
 from rmbench.policies.mem0.action_head import FlowMatchingHead
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.inputs import observation_encoder, step_inputs
-from rmbench.policies.mem0.memory import MemoryFusion, MemoryStore
+from rmbench.policies.mem0.memory import EventWindow, MemoryFusion, MemoryStore
 from rmbench.policies.mem0.planner import Planner
 from rmbench.policies.nn.ema import EMA
 from rmbench.policies.nn.normalize import Normalizer
@@ -52,7 +54,8 @@ class Executor(nn.Module):
         self.state_proj = nn.Linear(ACTION_DIM, d)
         self.head = FlowMatchingHead(d, cfg.horizon, cfg.action_dim, cfg.head_layers, cfg.heads,
                                      cfg.action_patch)
-        self.classifier = nn.Sequential(nn.Linear(3 * d, d), nn.GELU(), nn.Linear(d, 1))
+        reads = cfg.event_window + 1 if cfg.end_classifier == "event" else 3
+        self.classifier = nn.Sequential(nn.Linear(reads * d, d), nn.GELU(), nn.Linear(d, 1))
         self.normalizer = Normalizer(ACTION_DIM, cfg.action_dim)
 
     def encode(self, inputs: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
@@ -70,12 +73,15 @@ class Executor(nn.Module):
     def condition(self, c: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         return torch.cat([c, self.state_proj(self.normalizer.state(state))[:, None]], 1)
 
-    def end_logit(self, c: torch.Tensor) -> torch.Tensor:
-        """P(the subtask has ended) as a logit (B,), from c_t; read detached unless
+    def end_logit(self, c: torch.Tensor, z: torch.Tensor, events: EventWindow) -> torch.Tensor:
+        """P(the subtask has ended) as a logit (B,): from z_img and the event window
+        (end_classifier "event") or from c_t ("context"); read detached unless
         ``classifier_trains_encoder``, so its loss trains the classifier alone."""
+        x = (torch.cat([z[:, None], events.entries], 1) if self.cfg.end_classifier == "event"
+             else c)
         if not self.cfg.classifier_trains_encoder:
-            c = c.detach()
-        return self.classifier(c.flatten(1))[:, 0]
+            x = x.detach()
+        return self.classifier(x.flatten(1))[:, 0]
 
     def backbone_parameters(self) -> list[nn.Parameter]:
         return list(self.encoders.parameters())
@@ -113,6 +119,7 @@ class Mem0Trainer(nn.Module):
                                                  state_names)
         self.joint_scale = joint_noise_scale(cfg)
         self.memory = MemoryStore(batch_size, cfg.step_tokens, cfg.sliding_window, cfg.dim)
+        self.events = EventWindow(batch_size, cfg.event_window, cfg.dim)
         self.register_buffer("last_step", torch.full((batch_size,), -1, dtype=torch.long),
                              persistent=False)
         self.generator = torch.Generator().manual_seed(seed)
@@ -142,6 +149,7 @@ class Mem0Trainer(nn.Module):
             memory_tokens, memory_z = ex.encode([blurred, *inputs[1:]])
         step = batch[L.SUBTASK_STEP]
         reset = batch["episode_start"].bool()
+        self.events.reset(reset, z)
         if self.decompose:
             reset = reset | (step != self.last_step)
         self.memory.reset(reset, memory_tokens)
@@ -157,17 +165,20 @@ class Mem0Trainer(nn.Module):
             label = batch["end_label"].float()
             pos = label.sum().clamp(min=1)
             end_loss = F.binary_cross_entropy_with_logits(
-                ex.end_logit(c), label, pos_weight=((len(label) - pos) / pos).clamp(max=50))
+                ex.end_logit(c, z, self.events), label,
+                pos_weight=((len(label) - pos) / pos).clamp(max=50))
             loss = loss + cfg.classifier_weight * end_loss
             logs["loss/end"] = end_loss.item()
+        self.events.push(z)
         return loss, logs
 
     def extra_state(self) -> dict:
-        return {"memory": self.memory.state(), "last_step": self.last_step,
-                "generator": self.generator.get_state()}
+        return {"memory": self.memory.state(), "events": self.events.state(),
+                "last_step": self.last_step, "generator": self.generator.get_state()}
 
     def load_extra_state(self, state: dict) -> None:
         self.memory.load_state(state["memory"])
+        self.events.load_state(state["events"])
         self.last_step.copy_(state["last_step"])
         self.generator.set_state(state["generator"].cpu())
 

@@ -22,7 +22,7 @@ from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCa
 from rmbench.policies.action_space import EE_DIM, EEActions
 from rmbench.policies.checkpoint import save_checkpoint, saved_step
 from rmbench.policies.feature_cache import FeatureCache, with_features
-from rmbench.policies.mem0.classifier import end_labels
+from rmbench.policies.mem0.classifier import end_labels, event_labels
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
 from rmbench.policies.mem0.planner import DONE, planner_examples, planner_loss
@@ -55,12 +55,18 @@ class Mem0Frames(DemoDataset):
                          image_size=cfg.image_size, stride=cfg.memory_every,
                          environment_state=cfg.reads_state, **kw)
         self.decompose, self.goal_index = decompose, goal_index
-        self.end_window = cfg.end_window
-        self.labels = [end_labels(ep.subtask_step, cfg.end_window) for ep in self.low_dim]
+        self.cfg = cfg
+        self.labels = [self.end_label(ep) for ep in self.low_dim]
+
+    def end_label(self, ep) -> np.ndarray:
+        """The end classifier's (T,) targets for one episode, as its config reads them."""
+        if self.cfg.end_classifier == "event":
+            return event_labels(ep.subtask_step, self.cfg.end_span)
+        return end_labels(ep.subtask_step, self.cfg.end_window)
 
     def add_episodes(self, episodes: list) -> None:
         super().add_episodes(episodes)
-        self.labels += [end_labels(ep.subtask_step, self.end_window) for ep in episodes]
+        self.labels += [self.end_label(ep) for ep in episodes]
 
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
         item = super().__getitem__(i)
