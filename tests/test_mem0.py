@@ -13,7 +13,7 @@ from rmbench.data.reader import Dataset
 from rmbench.envs.registration import make
 from rmbench.policies.checkpoint import CheckpointError, read_config
 from rmbench.policies.mem0.agent import Mem0Policy
-from rmbench.policies.mem0.classifier import Debounce, end_labels
+from rmbench.policies.mem0.classifier import Debounce, end_labels, event_labels
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import Planner, planner_examples, runs
@@ -100,6 +100,48 @@ def test_end_labels_mark_the_last_l_frames_of_each_subtask():
     ex = planner_examples(7, idx, idx, done_index=9)
     assert [x.target for x in ex] == [0, 1, 2, 9]
     assert ex[2].keys == ((0, 3), (1, 5)) and ex[2].current == 5
+
+
+def test_event_labels_mark_the_frames_just_after_each_step_ends():
+    step = np.array([0, 0, 0, 1, 1, 1, 1, 1, 2, 2])
+    assert event_labels(step, 3).tolist() == [0, 0, 0, 1, 1, 1, 0, 0, 1, 1]
+    assert TINY.end_span == 4 and Mem0Config().end_span == 12  # 1.5 L: fires once per end
+
+
+def test_event_window_fills_on_the_episode_phase_and_outlives_subtask_ends(mn_ckpt):
+    env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
+    policy = Mem0Policy(f"{mn_ckpt}?ablation=gt_classifier", env)
+    obs, info = env.reset(seed=100000)
+    policy.reset(info["instruction"], {"seed": 100000})
+    zs = []
+    for t in range(7):
+        zs.append(policy.model.executor.encode(policy.inputs(obs))[1][0])
+        policy.act(obs)
+        if t == 2:  # a subtask ends: the sliding memory starts again, the event window not
+            policy.subtask_ended(policy.inputs(obs))
+        obs, *_ = env.step(np.asarray(obs["agent_pos"]) + 0.01 * (t + 1))
+    # the episode's first frame fills it, then every memory_every-th step enters: 0, 2, 4, 6
+    assert policy.cfg.event_window == 4 and TINY.memory_every == 2
+    want = torch.stack([zs[0], zs[2], zs[4], zs[6]])
+    assert torch.allclose(policy.events.entries[0], want, atol=1e-6)
+    env.close()
+
+
+def test_end_classifier_choice_and_checkpoints_from_before_it(mn_dataset, tmp_path):
+    with pytest.raises(ValueError, match="end_classifier"):
+        replace(TINY, end_classifier="clock")
+    before = {k: v for k, v in TINY.to_dict().items() if k != "end_classifier"}
+    assert Mem0Config.from_dict(before).end_classifier == "context"
+    # the published classifier on c_t still trains and runs
+    ctx = replace(TINY, end_classifier="context")
+    with keep_exports():
+        train_tiny(mn_dataset, tmp_path / "ctx", steps=2, cfg=ctx)
+    env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
+    policy = Mem0Policy(str(tmp_path / "ctx"), env)
+    assert policy.cfg.end_classifier == "context"
+    assert policy.model.executor.classifier[0].in_features == 3 * TINY.dim
+    roll_out(env, policy, seed=100000, steps=3)
+    env.close()
 
 
 def test_planner_output_depends_on_key_memory():
