@@ -424,3 +424,41 @@ def test_tables_give_each_rate_its_interval_and_mem0_its_differences():
     # the option off: the tables as they were
     plain = tables._markdown_table(res, ["mem0"])
     assert "| put_back_block | M(1) | 85.0 | 25.0 |" in plain
+
+
+def test_training_seeds_are_columns_of_their_own_folders_pooled_into_one_cell(capsys):
+    from rmbench.suite.plan import split_seed, with_seed
+
+    assert split_seed("mem0:no_key@1") == ("mem0:no_key", 1) and split_seed("dp") == ("dp", 0)
+    assert with_seed("mem0", 0) == "mem0" and with_seed("mem0", 2) == "mem0@2"
+    with pytest.raises(ValueError, match="whole number"):
+        parse_policy("mem0@x")
+    plan = Plan("state", ("press_button",), ("mem0", "mem0@1", "mem0:gt_classifier@1", "dp@0"))
+    assert plan.policies == ("mem0", "mem0@1", "mem0:gt_classifier@1", "dp")  # @0 is plain
+    out, task = Path("/t"), "press_button"
+    # seed 0 keeps the folders a one-seed table has; another seed trains its own checkpoint,
+    # which its inference ablation evaluates
+    assert plan.train_dir(out, task, "mem0") == Plan("state", (task,)).train_dir(out, task, "mem0")
+    assert plan.train_dir(out, task, "mem0@1") != plan.train_dir(out, task, "mem0")
+    assert trained_spec("mem0:gt_classifier@1") == "mem0@1"
+    assert plan.train_dir(out, task, "mem0:gt_classifier@1") == plan.train_dir(out, task, "mem0@1")
+    assert runner.column("mem0:no_key@1") == "no_key@1"
+    J = runner.Job
+    needs = runner.plan_jobs(plan, Path("/nonexistent"))
+    assert needs[J("eval", task, "mem0:gt_classifier@1")] == (J("train", task, "mem0@1"),)
+    # one cell per column: the seeds' episodes pooled, each seed's row kept
+    row = lambda k, p: {"success_rate": k / 100, "successes": k, "episodes": 100,  # noqa: E731
+                        "mean_progress": p, "endings": {"success": k, "timeout": 100 - k},
+                        "failure_reasons": {"timeout": 100 - k}, "train_wall_s": 10.0,
+                        "eval_wall_s": 1.0, "machines": {"train": [], "eval": []},
+                        "memory": "m"}
+    pooled = stages.pooled_row({0: row(30, 0.5), 1: row(20, 0.3)})
+    assert pooled["success_rate"] == 0.25 and pooled["episodes"] == 200
+    assert pooled["mean_progress"] == 0.4 and pooled["endings"] == {"success": 50, "timeout": 150}
+    assert pooled["success_ci95"][0] < 0.25 < pooled["success_ci95"][1]
+    assert set(pooled["seeds"]) == {"0", "1"} and pooled["train_wall_s"] == 20.0
+    assert stages.pooled_row({0: row(30, 0.5), 1: None}) is None  # not until every seed is in
+    assert stages.pooled_row({0: row(30, 0.5)}) == row(30, 0.5)
+    assert cli(["table", "--obs", "state", "--tasks", "press_button", "--train-seeds", "-1",
+                "--report-only", "--out", "/nonexistent"]) != 0
+    assert "--train-seeds takes whole numbers" in capsys.readouterr().err

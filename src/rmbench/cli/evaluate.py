@@ -91,12 +91,16 @@ def cmd_table(args) -> int:
     from pathlib import Path
 
     from rmbench.suite import runner, tables
-    from rmbench.suite.plan import ALL_POLICIES, Plan, recipe_of
+    from rmbench.suite.plan import ALL_POLICIES, Plan, recipe_of, with_seed
     from rmbench.tasks.registry import ordered
 
     tasks = ([t.name for t in ordered()] if args.tasks == "all"
              else [t.strip() for t in args.tasks.split(",") if t.strip()])
     policies = [p.strip() for p in (args.policies or ",".join(ALL_POLICIES)).split(",") if p.strip()]
+    seeds = [int(s) for s in args.train_seeds.split(",") if s.strip()]
+    if not seeds or min(seeds) < 0:
+        raise ValueError(f"--train-seeds takes whole numbers >= 0, got {args.train_seeds!r}")
+    policies = [with_seed(p, s) for p in policies for s in seeds]
     plan = Plan(args.obs, tuple(tasks), tuple(policies), video=args.video, device=args.device,
                 **recipe_of(args))
     out = Path(args.out or f"runs/table_{args.obs}")
@@ -193,7 +197,11 @@ def add_parsers(sub) -> None:
     p.add_argument("--policies", default=None,
                    help="comma-separated: mem0, mem0:ABLATION (no_anchor, no_sliding, "
                         "no_memory, no_key, gt_classifier), dp, act (default: all of them; "
-                        "no_key and gt_classifier on M(n) tasks only)")
+                        "no_key and gt_classifier on M(n) tasks only); SPEC@N: trained with "
+                        "seed N")
+    p.add_argument("--train-seeds", default="0", metavar="N[,N...]",
+                   help="train every column with each of these seeds; its cell pools their "
+                        "evaluations (the mean over seeds), each seed's row kept (default 0)")
     add_recipe_arguments(p)
     p.add_argument("--video", default="none", help="evaluation videos: first:K, failures, none")
     p.add_argument("--device", default="cpu",

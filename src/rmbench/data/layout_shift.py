@@ -18,7 +18,9 @@ reach) is left out. This is kinematics only: the copy is what the recorded arm m
 be over the moved scene, not a new simulation of it.
 
 Solving the copies takes about two minutes for 16 copies of 50 demonstrations, and every
-policy trained on a dataset asks for the same ones (the seed is the training seed), so
+policy trained on a dataset asks for the same ones (drawn with ``COPIES_SEED`` whatever the
+training seed: the copies are part of the data, and two training seeds differ in the model's
+initialisation, batch order and noise over the same copies), so
 ``add_layout_copies`` keeps them in ``DATASET/.cache/layout-shift-*.npz``: named by the
 copies, reach, seed, the constants above, MuJoCo's version and the bytes of each
 demonstration's data file (so that a dataset copied to another machine, where its files'
@@ -57,6 +59,8 @@ CACHE_FORMAT = 2  # bumped when what a cache file holds changes
 FIELDS = ("state", "action", "environment_state")  # what a copy changes of its source
 
 log = logging.getLogger(__name__)
+
+COPIES_SEED = 0  # the draws of every training's layout copies (see above)
 
 
 def xy_columns(state_names) -> tuple[np.ndarray, np.ndarray]:

@@ -28,7 +28,7 @@ import torch
 from torch import nn
 
 from rmbench.data import layout as L
-from rmbench.data.layout_shift import add_layout_copies
+from rmbench.data.layout_shift import COPIES_SEED, add_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
 from rmbench.policies.base import BasePolicy
@@ -224,7 +224,7 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
     model.normalizer.load_state_dict(norm.state_dict())
     if cfg.layout_copies:
         describe["layout_copies_kept"] = add_layout_copies(
-            frames, cfg.layout_copies, cfg.layout_shift, train_cfg.seed)
+            frames, cfg.layout_copies, cfg.layout_shift, COPIES_SEED)
     if cfg.reads_state:
         set_state_stats((model.encoders,), ds.stats, frames.low_dim)
     trainer = trainer_cls(model, train_cfg.seed, tuple(ds.state_names or ()))

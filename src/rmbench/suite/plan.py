@@ -1,7 +1,9 @@
 """What a benchmark table is made of: its tasks, its policy columns, the recipe every policy
 trains with, and where each cell's data, checkpoint and evaluation live.
 
-A policy column is a spec: ``mem0``, ``mem0:ABLATION[+ABLATION...]``, ``dp`` or ``act``. Mem-0's
+A policy column is a spec: ``mem0``, ``mem0:ABLATION[+ABLATION...]``, ``dp`` or ``act``, each
+optionally ``@SEED``, the training seed (``mem0:no_key@1``; no suffix is seed 0). A column
+trained with several seeds (``--train-seeds 0,1``) reads as their mean. Mem-0's
 trained ablations (``no_anchor``, ``no_sliding``, ``no_memory``, ``no_key``) train their own
 checkpoint; ``gt_classifier`` changes only inference, so ``mem0:gt_classifier`` evaluates the
 ``mem0`` checkpoint. ``no_key`` and ``gt_classifier`` concern the planner and the subtask-end
@@ -42,12 +44,29 @@ COLLECT_CAMERAS = {"state": (("head",), (16, 16)),
                    "pixels": (("head", "left_wrist", "right_wrist"), (320, 240))}
 
 
+def split_seed(spec: str) -> tuple[str, int]:
+    """``mem0:no_key@1`` -> ("mem0:no_key", 1); no suffix is training seed 0."""
+    base, at, seed = spec.partition("@")
+    if not at:
+        return spec, 0
+    if not seed.isdigit():
+        raise ValueError(f"{spec}: the training seed after '@' must be a whole number")
+    return base, int(seed)
+
+
+def with_seed(spec: str, seed: int) -> str:
+    """The spec trained with ``seed``: seed 0 carries no suffix, so its folders are the same
+    whether a table asks for one seed or several."""
+    return spec if seed == 0 else f"{spec}@{seed}"
+
+
 def parse_policy(spec: str) -> tuple[str, tuple[str, ...], tuple[str, ...]]:
     """``mem0:no_anchor+gt_classifier`` -> ("mem0", ("no_anchor",), ("gt_classifier",)): the
-    policy, its trained ablations and its inference ablations. An unknown one is a ValueError."""
+    policy, its trained ablations and its inference ablations (any ``@SEED`` aside). An unknown
+    one is a ValueError."""
     from rmbench.policies.mem0.config import INFERENCE_ABLATIONS, TRAINED_ABLATIONS
 
-    name, _, rest = spec.partition(":")
+    name, _, rest = split_seed(spec)[0].partition(":")
     if name not in POLICY_NAMES:
         raise ValueError(f"unknown policy {spec!r}; policies: {', '.join(ALL_POLICIES)}")
     ablations = tuple(a for a in rest.split("+") if a)
@@ -62,9 +81,9 @@ def parse_policy(spec: str) -> tuple[str, tuple[str, ...], tuple[str, ...]]:
 
 
 def trained_spec(spec: str) -> str:
-    """The spec whose checkpoint ``spec`` evaluates: ``mem0:gt_classifier`` -> ``mem0``."""
+    """The spec whose checkpoint ``spec`` evaluates: ``mem0:gt_classifier@1`` -> ``mem0@1``."""
     name, trained, _ = parse_policy(spec)
-    return name + (":" + "+".join(trained) if trained else "")
+    return with_seed(name + (":" + "+".join(trained) if trained else ""), split_seed(spec)[1])
 
 
 def applies(spec: str, tmc: str) -> bool:
@@ -211,7 +230,8 @@ class Plan:
         if not self.tasks or not self.policies:
             raise ValueError("a table needs at least one task and one policy")
         object.__setattr__(self, "tasks", tuple(get_task(t).name for t in self.tasks))
-        object.__setattr__(self, "policies", tuple(self.policies))
+        object.__setattr__(self, "policies", tuple(dict.fromkeys(
+            with_seed(*split_seed(p)) for p in self.policies)))  # "@0" is the plain spec
         object.__setattr__(self, "sets", tuple(self.sets))
         for spec in self.policies:
             parse_policy(spec)

@@ -153,8 +153,10 @@ class RayJobs:
 
 # ------------------------------------------------------------------------------- display
 def column(spec: str) -> str:
-    """A spec's short column name: Mem-0, DP, ACT, or Mem-0's ablation."""
-    return {"mem0": "Mem-0", "dp": "DP", "act": "ACT"}.get(spec, spec.removeprefix("mem0:"))
+    """A spec's short column name: Mem-0, DP, ACT, or Mem-0's ablation (and @seed)."""
+    base, at, seed = spec.partition("@")
+    name = {"mem0": "Mem-0", "dp": "DP", "act": "ACT"}.get(base, base.removeprefix("mem0:"))
+    return name + at + seed
 
 
 class Progress:

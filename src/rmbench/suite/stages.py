@@ -15,20 +15,27 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.data import CollectConfig, collect
-from rmbench.data.layout_shift import layout_copies_cached, solve_layout_copies
+from rmbench.data.layout_shift import COPIES_SEED, layout_copies_cached, solve_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.envs.noise import NoiseSpec
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
 from rmbench.machine import describe
-from rmbench.suite.plan import COLLECT_CAMERAS, Plan, config_for, memory_of, parse_policy, trained_spec
+from rmbench.suite.plan import (
+    COLLECT_CAMERAS,
+    Plan,
+    config_for,
+    memory_of,
+    parse_policy,
+    split_seed,
+    trained_spec,
+)
 from rmbench.tasks import get_task
 from rmbench.training.loop import CURVE_CSV, TrainConfig
 from rmbench.video import write_atomic
 
 TIMING = "timing.json"
-TRAIN_SEED = 0  # every cell's training seed, which the layout copies' draws follow
 
 
 def read_json(path: Path, default):
@@ -68,7 +75,7 @@ def collected(plan: Plan, out: Path, task: str) -> bool:
     if any(cache.missing(*wanted) for cache, wanted in feature_caches(plan, out, task)):
         return False
     data = plan.train_data_dir(out, task)
-    return all(layout_copies_cached(data, n, reach, TRAIN_SEED)
+    return all(layout_copies_cached(data, n, reach, COPIES_SEED)
                for n, reach in layout_copy_sets(plan))
 
 
@@ -177,9 +184,9 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
             add_time(root.parent, "features_wall_s", time.perf_counter() - t0)
     data = plan.train_data_dir(out, task)
     for n, reach in layout_copy_sets(plan):
-        if not layout_copies_cached(data, n, reach, TRAIN_SEED):
+        if not layout_copies_cached(data, n, reach, COPIES_SEED):
             t0 = time.perf_counter()
-            solve_layout_copies(data, n, reach, TRAIN_SEED, workers)
+            solve_layout_copies(data, n, reach, COPIES_SEED, workers)
             add_time(root.parent, "layout_copies_wall_s", time.perf_counter() - t0)
     ds, timing = Dataset(root), read_json(root.parent / TIMING, {})
     return {"path": str(root), "episodes": ds.num_episodes, "frames": ds.num_frames,
@@ -202,7 +209,7 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
     if not trained(plan, out, task, spec):
         spec = trained_spec(spec)
         cfg = config_for(spec, plan.obs, plan.sets)
-        train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=TRAIN_SEED,
+        train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=split_seed(spec)[1],
                                 save_every=min(500, plan.steps), device=plan.device)
         _, fit = trainable(parse_policy(spec)[0])
         result = fit(plan.train_data_dir(out, task), folder, cfg, train_cfg, progress=progress)
@@ -260,3 +267,30 @@ def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | No
                          "eval": eval_timing.get("machines", [])},
             "memory": memory_of(spec, get_task(task).tmc, cfg), "checkpoint": str(ckpt),
             "evaluation": str(evals)}
+
+
+def pooled_row(rows: dict[int, dict[str, Any] | None]) -> dict[str, Any] | None:
+    """One column's row over its training seeds (``{seed: cell_row}``): the single seed's row
+    as it is; for several, their episodes pooled (so the success rate is the seeds' mean, each
+    having run the same episodes) with the pooled Wilson interval, and every seed's row under
+    ``seeds``. None until every seed is evaluated: a mean over the seeds done so far would
+    change as the others arrive."""
+    if any(r is None for r in rows.values()):
+        return None
+    if len(rows) == 1:
+        return next(iter(rows.values()))
+    seeds = [rows[s] for s in sorted(rows)]
+    n, k = sum(r["episodes"] for r in seeds), sum(r["successes"] for r in seeds)
+    walls = {w: sum(r[w] or 0 for r in seeds) for w in ("train_wall_s", "eval_wall_s")}
+    return {"success_rate": round(k / n, 4), "successes": k,
+            "success_ci95": [round(v, 4) for v in wilson(k, n)],
+            "mean_progress": round(sum(r["mean_progress"] * r["episodes"] for r in seeds) / n, 4),
+            "episodes": n,
+            "endings": dict(sum((Counter(r["endings"]) for r in seeds), Counter())),
+            "failure_reasons": dict(sum((Counter(r["failure_reasons"]) for r in seeds),
+                                        Counter()).most_common()),
+            **walls, "train_wall_from_step": 0,
+            "machines": {stage: [m for r in seeds for m in r["machines"][stage]]
+                         for stage in ("train", "eval")},
+            "memory": seeds[0]["memory"],
+            "seeds": {str(s): rows[s] for s in sorted(rows)}}

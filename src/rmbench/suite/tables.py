@@ -2,7 +2,8 @@
 ``table.md``, the benchmark's two tables (policies beside the published ones, Mem-0's
 ablations beside the published averages) with M(1) and M(n) groups and averages. A cell not
 evaluated yet reads "—" and keeps its group's average empty. Every success rate carries its
-Wilson 95% interval (``success_ci95`` in each cell of table.json, "[low, high]" in table.md)
+Wilson 95% interval (``success_ci95`` in each cell of table.json, "[low, high]" in table.md);
+a column trained with several seeds is one cell, their episodes pooled, each seed's row in it
 and Mem-0 against each other column of its row carries the difference's (``differences``):
 whether two cells differ by more than the episodes' noise."""
 
@@ -17,9 +18,9 @@ from rmbench.eval.chance import chance
 from rmbench.eval.intervals import difference, outside_noise
 from rmbench.eval.report import PUBLISHED, Rate, format_cell, table
 from rmbench.machine import describe, short
-from rmbench.suite.plan import Plan, applies
+from rmbench.suite.plan import Plan, applies, split_seed
 from rmbench.suite.runner import column
-from rmbench.suite.stages import TIMING, cell_row, read_json
+from rmbench.suite.stages import TIMING, cell_row, pooled_row, read_json
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
 
@@ -37,9 +38,12 @@ def results(plan: Plan, out: Path, command: str = "",
     """Every cell's row (None where not evaluated) with the plan, the failures of the last
     run, the wall times (per model in each row; the table's summed over its runs) and the
     machine."""
-    cells: dict[str, dict[str, Any]] = {}
+    seeds: dict[str, dict[str, dict[int, Any]]] = {}
     for task, spec in plan.cells():
-        cells.setdefault(task, {})[spec] = cell_row(plan, out, task, spec)
+        base, seed = split_seed(spec)
+        seeds.setdefault(task, {}).setdefault(base, {})[seed] = cell_row(plan, out, task, spec)
+    cells = {task: {base: pooled_row(rows) for base, rows in columns.items()}
+             for task, columns in seeds.items()}
     collect = {t: read_json(Path(out) / t / TIMING, {}).get("collect_wall_s") for t in cells}
     levels = {t: asdict(chance(t)) for t in cells}
     return {"command": command, "plan": plan.to_dict(), "cells": cells, "chance": levels,
@@ -69,8 +73,11 @@ def differences(cells: dict[str, dict[str, Any]], base: str = "mem0") -> dict[st
     return out
 
 
-def _columns(res: dict[str, Any], specs: tuple[str, ...]) -> list[str]:
-    return [s for s in specs if s in res["plan"]["policies"]]
+def _columns(res: dict[str, Any], specs: tuple[str, ...] | None = None) -> list[str]:
+    """The table's columns among ``specs`` (all, in the plan's order, if None): one per
+    policy spec, whatever its training seeds."""
+    planned = list(dict.fromkeys(split_seed(p)[0] for p in res["plan"]["policies"]))
+    return planned if specs is None else [s for s in specs if s in planned]
 
 
 def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] = (),
@@ -145,7 +152,7 @@ def markdown(res: dict[str, Any], intervals: bool = True) -> str:
               "memory, which guesses where only the past would tell (`eval/chance.py`):", ""]
     lines += [f"- {t}: {100 * c['rate']:.1f}%, {c['basis']}" for t, c in res["chance"].items()]
     lines += ["", "## Progress (mean of each episode's best, %)", ""]
-    lines += _markdown_table(res, list(plan["policies"]), metric="mean_progress")
+    lines += _markdown_table(res, _columns(res), metric="mean_progress")
     wall = res["wall_s"]
     machines = {short(m) for row in res["cells"].values() for cell in row.values() if cell
                 for stage in cell.get("machines", {}).values() for m in stage}

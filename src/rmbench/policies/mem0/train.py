@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from rmbench.data import layout as L
-from rmbench.data.layout_shift import add_layout_copies
+from rmbench.data.layout_shift import COPIES_SEED, add_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
 from rmbench.policies.action_space import EE_DIM, EEActions
@@ -116,7 +116,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         stats, examples.low_dim, cfg.horizon, cfg.relative_actions))
     if cfg.layout_copies:
         describe["layout_copies_kept"] = add_layout_copies(
-            examples, cfg.layout_copies, cfg.layout_shift, train_cfg.seed)
+            examples, cfg.layout_copies, cfg.layout_shift, COPIES_SEED)
     if norm is None:
         norm = to_pose_actions(examples, stats, cfg.horizon)
     model.executor.normalizer.load_state_dict(norm.state_dict())
