@@ -30,7 +30,11 @@ KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress"
 
 
 def cell(row: dict, task: str) -> dict:
+    """A cell's record; a cell pooled over training seeds keeps each seed's record too."""
     out = {k: row.get(k) for k in KEEP}
+    if "seeds" in row:
+        out["seeds"] = {seed: cell(r, task) for seed, r in row["seeds"].items()}
+        return out
     rate = Rate.of(row)  # a row written before rates carried their counts has the rate alone
     out["successes"] = rate.successes
     out["success_ci95"] = [round(v, 4) for v in wilson(rate.successes, rate.episodes)]

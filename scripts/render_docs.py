@@ -178,10 +178,14 @@ def mn_recipe() -> str:
             row = cand["cells"].get(task)
             if row is None:
                 continue
-            ends = (row.get("mem0") or {}).get("boundaries")
-            rows.append([cand["name"], task, *(rate(row.get(s)) for s in specs),
-                         "—" if not ends else "/".join(str(ends[v]) for v in
-                                                       ("on_time", "early", "late", "missed", "false"))])
+            mem0 = row.get("mem0") or {}
+            # a cell pooled over training seeds: each seed's ends, added up
+            runs = [c.get("boundaries") for c in mem0.get("seeds", {}).values()] or \
+                [mem0.get("boundaries")]
+            verdicts = ("on_time", "early", "late", "missed", "false")
+            ends = ("—" if not all(runs) else
+                    "/".join(str(sum(r[v] for r in runs)) for v in verdicts))
+            rows.append([cand["name"], task, *(rate(row.get(s)) for s in specs), ends])
     return markdown(["recipe", "task", "Mem-0", "`no_key`", "`gt_classifier`",
                      "Mem-0's ends: on time/early/late/missed/false"], rows)
 
