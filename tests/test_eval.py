@@ -166,6 +166,25 @@ def test_unknown_policy_lists_the_known_ones(tmp_path):
             cfg(tmp_path, policy=name)
 
 
+def test_a_broken_policy_plugin_leaves_every_other_policy_loadable(monkeypatch):
+    from rmbench.policies import registry
+
+    class Broken:  # another package's entry point whose module does not import
+        name, value = "broken", "no_such_module_here:register"
+
+        def load(self):
+            import no_such_module_here  # noqa: F401
+
+    real = list(registry._plugins())
+    monkeypatch.setattr(registry, "_plugins", lambda: [*real, Broken()])
+    monkeypatch.setattr(registry, "_loaded", False)
+    monkeypatch.setattr(registry, "_failed", {})
+    with pytest.warns(RuntimeWarning, match="'broken' failed to import"):
+        assert registry.parse_spec("expert")[0].name == "expert"
+    with pytest.raises(UnknownPolicyError, match="failed to import: broken: no_such_module_here"):
+        registry.parse_spec("theirs")
+
+
 def test_report_renders_markdown_and_html(tmp_path):
     from rmbench.eval.report import write_report
 

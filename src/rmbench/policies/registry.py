@@ -10,6 +10,7 @@ every policy, wherever it lives; another installed package can add policies the 
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.metadata import EntryPoints, entry_points
@@ -70,6 +71,9 @@ def parse_spec(spec: str) -> tuple[PolicyEntry, str | None]:
     if name not in POLICIES:
         hint = "" if _plugins() else (f" (no {ENTRY_POINT_GROUP!r} entry points: rmbench's come "
                                       "with its installation, pip install -e .)")
+        if _failed:
+            hint += " (plugins that failed to import: " + "; ".join(
+                f"{k}: {v}" for k, v in _failed.items()) + ")"
         raise UnknownPolicyError(f"unknown policy {spec!r}; policies: "
                                  + ", ".join(f"{e.name}{':ARG' if e.needs_argument else ''}"
                                              for e in POLICIES.values()) + hint)
@@ -110,6 +114,7 @@ def make_policy(spec: str, env) -> Policy:
 
 ENTRY_POINT_GROUP = "rmbench.policies"
 _loaded = False
+_failed: dict[str, str] = {}  # entry-point name -> why its module did not import
 
 
 def _plugins() -> EntryPoints:
@@ -118,10 +123,18 @@ def _plugins() -> EntryPoints:
 
 def _load_plugins() -> None:
     """Imports each module of the entry-point group (registering its policies) once. A module
-    that fails to import raises here, and the next call tries again."""
+    that fails to import (another package's broken plugin) is skipped with a warning, so the
+    policies of every other one still load; asking for a policy no module registered names
+    the ones that failed."""
     global _loaded
     if _loaded:
         return
     for plugin in _plugins():
-        plugin.load()  # an import: a module loaded before is not run (nor registered) again
+        try:
+            plugin.load()  # an import: a module loaded before is not run (nor registered) again
+        except Exception as err:  # noqa: BLE001 - any import-time error of foreign code
+            _failed[plugin.name] = f"{plugin.value}: {type(err).__name__}: {err}"
+            warnings.warn(f"rmbench policy plugin {plugin.name!r} failed to import "
+                          f"({_failed[plugin.name]}); its policies are unavailable",
+                          RuntimeWarning, stacklevel=2)
     _loaded = True
