@@ -86,9 +86,14 @@ def test_anchor_is_the_first_frame_of_the_subtask_and_stays(mn_ckpt):
     env.close()
 
 
-def test_debounce_needs_l_consecutive_positives():
+def test_debounce_needs_l_consecutive_positives_and_one_run_declares_one_end():
     d = Debounce(3)
     assert [d.update(x) for x in [1, 1, 0, 1, 1, 1, 1]] == [False] * 5 + [True, False]
+    # the run that declared goes on: no second end until it breaks
+    assert [d.update(x) for x in [1, 1, 1, 1, 0, 1, 1, 1]] == [False] * 7 + [True]
+    d.update(True)
+    d.reset()  # a new episode re-arms it
+    assert [d.update(x) for x in [1, 1, 1]] == [False, False, True]
     with pytest.raises(ValueError):
         Debounce(0)
 

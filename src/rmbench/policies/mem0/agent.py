@@ -200,7 +200,8 @@ class Mem0Policy(BasePolicy):
         nxt = self.plan(frame if not self.cfg.use_key else self.first)
         if nxt != self.done:
             self.subtask, self.start_subtask = nxt, True
-        self.debounce.reset()
+        # the debounce is not re-armed here: the run of positives that declared this end
+        # must break before another can count
 
     def plan(self, first: torch.Tensor) -> int:
         planner = self.model.planner

@@ -10,20 +10,35 @@ import numpy as np
 
 
 class Debounce:
+    """L consecutive positives declare an end; one unbroken run of positives declares one.
+
+    After an end the run must break (one negative step) before the count starts again, so a
+    classifier that stays positive past its span (the policy lingering on a finished push, a
+    state the demonstrations never held) cannot declare the same end twice. ``reset`` (a new
+    episode) re-arms it."""
+
     def __init__(self, window: int):
         if window < 1:
             raise ValueError(f"window must be >= 1, got {window}")
         self.window = window
         self.count = 0
+        self.armed = True
 
     def reset(self) -> None:
         self.count = 0
+        self.armed = True
 
     def update(self, positive: bool) -> bool:
-        """Feed one step; True on the step that completes L consecutive positives."""
-        self.count = self.count + 1 if positive else 0
+        """Feed one step; True on the step that completes L consecutive positives of a run
+        that has not declared an end yet."""
+        if not positive:
+            self.count, self.armed = 0, True
+            return False
+        if not self.armed:
+            return False
+        self.count += 1
         if self.count >= self.window:
-            self.count = 0
+            self.count, self.armed = 0, False
             return True
         return False
 
