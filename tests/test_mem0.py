@@ -242,6 +242,9 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(mn_dataset, tmp_path,
     interrupt_training(lambda: train_tiny(mn_dataset, tmp_path / "b", steps=6))
     result = train_tiny(mn_dataset, tmp_path / "b", steps=6)
     assert result["resumed_from"] == 3
+    # the planner was fitted before the interruption: its report comes back with the state
+    report = [json.loads((tmp_path / r / "training" / "planner.json").read_text()) for r in "ab"]
+    assert report[0] == report[1] and report[1]["decisions"] > 0
     a, b = load_file(tmp_path / "a" / "model.safetensors"), load_file(tmp_path / "b" / "model.safetensors")
     # same batches, optimiser, RNGs and memory store: bit for bit
     assert a.keys() == b.keys()

@@ -14,6 +14,8 @@ head and subtask-end classifier.
 
 from __future__ import annotations
 
+import json
+
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -123,6 +125,7 @@ class Mem0Trainer(nn.Module):
         self.register_buffer("last_step", torch.full((batch_size,), -1, dtype=torch.long),
                              persistent=False)
         self.generator = torch.Generator().manual_seed(seed)
+        self.planner_report: dict | None = None  # the planner's fit (train.py), saved with the state
         for p in model.planner.parameters():
             p.requires_grad_(False)
         # built after the planner is fitted: its weights are copied as they are and stay
@@ -174,13 +177,15 @@ class Mem0Trainer(nn.Module):
 
     def extra_state(self) -> dict:
         return {"memory": self.memory.state(), "events": self.events.state(),
-                "last_step": self.last_step, "generator": self.generator.get_state()}
+                "last_step": self.last_step, "generator": self.generator.get_state(),
+                "planner_report": json.dumps(self.planner_report)}
 
     def load_extra_state(self, state: dict) -> None:
         self.memory.load_state(state["memory"])
         self.events.load_state(state["events"])
         self.last_step.copy_(state["last_step"])
         self.generator.set_state(state["generator"].cpu())
+        self.planner_report = json.loads(state.get("planner_report", "null"))
 
     def after_step(self) -> None:
         if self.ema is not None:

@@ -133,6 +133,8 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         planner_report = fit_planner(model, ds, cfg, train_cfg, planner_texts.index(DONE), progress)
     trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed,
                           describe.get("state_names", ()))
+    # kept in the training state, so a run interrupted after the planner's fit still reports it
+    trainer.planner_report = planner_report
     frames = with_features(examples, ds, cfg)
 
     def batches(start: int, rank: int, world: int):
@@ -142,9 +144,9 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     result = train(trainer, batches, train_cfg, out, describe, progress,
                    write_checkpoint=save_checkpoint, checkpoint_step=saved_step,
                    config_defaults=type(cfg)().to_dict())
-    if planner_report is not None:
+    if trainer.planner_report is not None:
         write_atomic(out / "training" / "planner.json",
-                     (json.dumps(planner_report, indent=2) + "\n").encode())
+                     (json.dumps(trainer.planner_report, indent=2) + "\n").encode())
     return result
 
 
