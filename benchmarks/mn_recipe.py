@@ -22,6 +22,7 @@ from rmbench.eval.boundaries import summarize
 from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
 from rmbench.eval.report import Rate
+from rmbench.suite.tables import differences
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "mn_recipe.json"
@@ -63,7 +64,9 @@ def main(argv: list[str] | None = None) -> int:
             cells.setdefault(task, {})[spec] = cell(row, task)
     doc = json.loads(args.out.read_text()) if args.out.exists() else {"candidates": []}
     entry = {"name": args.name, "changes": args.changes, "command": res.get("command", ""),
-             "plan": res.get("plan"), "cells": cells}
+             "plan": res.get("plan"), "cells": cells,
+             # Mem-0 minus each other column, with Newcombe's 95% interval
+             "differences": differences(cells)}
     doc["candidates"] = [c for c in doc["candidates"] if c["name"] != args.name] + [entry]
     write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
     print(f"wrote {args.out}")
