@@ -121,9 +121,9 @@ class Mem0Policy(BasePolicy):
         tokens, z = ex.encode(inputs)
         if self.t == 0:
             self.events.reset(torch.ones(1, dtype=torch.bool), z)
-        if self.t == 0 and self.decompose:
-            self.first = self.model.planner.embed(self.planner_inputs(inputs))
-            self.subtask = self.plan(self.first)
+            if self.decompose:
+                self.first = self.model.planner.embed(self.planner_inputs(inputs))
+                self.subtask = self.plan(self.first)
         elif self.decompose and cfg.gt_classifier and self.env.subtask_stage > self.stage:
             # The simulator counts the step done after the action that did it: this frame is
             # the next step's first, as in the demonstrations' labels.
