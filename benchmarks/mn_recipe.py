@@ -18,31 +18,11 @@ import argparse
 import json
 from pathlib import Path
 
-from rmbench.eval.boundaries import summarize
-from rmbench.eval.harness import read_records
-from rmbench.eval.intervals import wilson
-from rmbench.eval.report import Rate
+from rmbench.suite.records import cell_record
 from rmbench.suite.tables import differences
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "mn_recipe.json"
-KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",
-        "failure_reasons", "train_wall_s", "eval_wall_s", "machines")
-
-
-def cell(row: dict, task: str) -> dict:
-    """A cell's record; a cell pooled over training seeds keeps each seed's record too."""
-    out = {k: row.get(k) for k in KEEP}
-    if "seeds" in row:
-        out["seeds"] = {seed: cell(r, task) for seed, r in row["seeds"].items()}
-        return out
-    rate = Rate.of(row)  # a row written before rates carried their counts has the rate alone
-    out["successes"] = rate.successes
-    out["success_ci95"] = [round(v, 4) for v in wilson(rate.successes, rate.episodes)]
-    out["boundaries"] = summarize(read_records(Path(row["evaluation"]) / task / "episodes.jsonl"))
-    planner = Path(row["checkpoint"]) / "training" / "planner.json"  # M(n) checkpoints only
-    out["planner"] = json.loads(planner.read_text()) if planner.exists() else None
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -61,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
             row = res["cells"].get(task, {}).get(spec)
             if row is None:
                 raise SystemExit(f"{args.table}: {task} {spec} is not evaluated yet")
-            cells.setdefault(task, {})[spec] = cell(row, task)
+            cells.setdefault(task, {})[spec] = cell_record(row, task)
     doc = json.loads(args.out.read_text()) if args.out.exists() else {"candidates": []}
     entry = {"name": args.name, "changes": args.changes, "command": res.get("command", ""),
              "plan": res.get("plan"), "cells": cells,

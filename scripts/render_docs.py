@@ -24,11 +24,13 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from rmbench.data.layout import FORMAT
 from rmbench.eval.chance import chance
 from rmbench.eval.intervals import format_rate
 from rmbench.eval.report import PUBLISHED, Rate
 from rmbench.suite.plan import applies
 from rmbench.suite.tables import PUBLISHED_ABLATIONS, difference_table, differences
+from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered
 from rmbench.video import write_atomic
 
@@ -85,7 +87,8 @@ def _state_rows(res: dict, specs: list[str], extra: Callable[[str], list] = lamb
         row = cells[task.name]
         groups.setdefault(task.tmc, []).append(task.name)
         rows.append([task.name, task.tmc]
-                    + [rate(row.get(s)) if applies(s, task.tmc) else "n/a" for s in specs]
+                    + [(rate(row.get(s)) + _older(task.tmc, s, row.get(s)))
+                       if applies(s, task.tmc) else "n/a" for s in specs]
                     + extra(task.name))
         if task.name == [t.name for t in ordered() if t.tmc == task.tmc][-1]:
             rows.append(_average(res, specs, groups[task.tmc], f"average {task.tmc}", task.tmc)
@@ -93,6 +96,25 @@ def _state_rows(res: dict, specs: list[str], extra: Callable[[str], list] = lamb
     everything = [t for names in groups.values() for t in names]
     rows.append(_average(res, specs, everything, "average (all)", "") + extra_avg(""))
     return rows
+
+
+def _older(tmc: str, spec: str, cell: dict | None) -> str:
+    """' †' for a Mem-0 cell of an M(n) row trained on datasets older than the current
+    format: its planner and end classifier learnt another subtask layout (CHANGELOG.md).
+    M(1) Mem-0 runs one subtask, the goal, and DP and ACT read no subtask: the format
+    changes nothing they learn."""
+    old = tmc == "M(n)" and spec.startswith("mem0") and cell is not None \
+        and cell.get("dataset") != FORMAT
+    return " †" if old else ""
+
+
+def _footnote(table: str, lead: str = "†") -> str:
+    """The † note under a table that marks cells trained on older datasets."""
+    if "†" not in table and lead == "†":
+        return ""
+    return (f"\n{lead} trained on datasets older than format `{FORMAT}`, where a subtask repeated "
+            "back to back was one subtask (CHANGELOG.md, 2026-11-27); not re-run on the "
+            "current data yet.\n")
 
 
 def _average(res: dict, specs: list[str], tasks: list[str], name: str, group: str) -> list[str]:
@@ -103,7 +125,9 @@ def _average(res: dict, specs: list[str], tasks: list[str], name: str, group: st
             out.append("n/a" if not all(applies(s, g) for g in ({group} if group else {"M(1)", "M(n)"}))
                        else "—")
         else:
-            out.append(f"{100 * sum(v['success_rate'] for v in vals) / len(vals):.1f}")
+            older = any(_older(get_task(t).tmc, s, v) for t, v in zip(tasks, vals, strict=True))
+            out.append(f"{100 * sum(v['success_rate'] for v in vals) / len(vals):.1f}"
+                       + (" †" if older else ""))
     return out
 
 
@@ -128,7 +152,8 @@ def readme_results() -> str:
     rows = _state_rows(res, specs,
                        lambda t: _chance(res, t) + [f"{PUBLISHED['Mem-0'][t]:g}"],
                        lambda g: _chance_avg(res, g) + [_published_avg("Mem-0", g)])
-    return markdown(header, rows)
+    table = markdown(header, rows)
+    return table + _footnote(table)
 
 
 def state_policies() -> str:
@@ -140,7 +165,8 @@ def state_policies() -> str:
     rows = _state_rows(res, specs,
                        lambda t: [f"{PUBLISHED[p][t]:g}" for p in published] + _chance(res, t),
                        lambda g: [_published_avg(p, g) for p in published] + _chance_avg(res, g))
-    return markdown(header, rows)
+    table = markdown(header, rows)
+    return table + _footnote(table)
 
 
 def state_ablations() -> str:
@@ -151,7 +177,9 @@ def state_ablations() -> str:
     rows = _state_rows(res, specs, lambda t: _chance(res, t), lambda g: _chance_avg(res, g))
     published = "; ".join(f"{g}: " + ", ".join(f"{COLUMN[s]} {v:g}" for s, v in vals.items())
                           for g, vals in PUBLISHED_ABLATIONS.items())
-    return markdown(header, rows) + f"\nPublished averages (per-task numbers unpublished): {published}.\n"
+    table = markdown(header, rows)
+    return (table + _footnote(table)
+            + f"\nPublished averages (per-task numbers unpublished): {published}.\n")
 
 
 def state_differences() -> str:
@@ -160,20 +188,23 @@ def state_differences() -> str:
     res = load("table_state.json")
     specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
              "mem0:gt_classifier"]
-    cells = {t: row for t, row in res["cells"].items()}
+    # a difference only between cells trained on the same dataset format
+    cells = {t: {s: c for s, c in row.items()
+                 if _older(get_task(t).tmc, s, c) == _older(get_task(t).tmc, "mem0", row["mem0"])}
+             for t, row in res["cells"].items()}
     lines = difference_table({"cells": cells, "differences": differences(cells)}, specs)
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + _footnote("\n".join(lines), "— where one of the two cells is")
 
 
 def mn_recipe() -> str:
-    """Mem-0's M(n) recipe candidates (``benchmarks/mn_recipe.py``) beside the table's own
-    cells of the rows they touch: each cell a rate with its interval, and for Mem-0 where its
+    """Mem-0's M(n) recipe candidates (``benchmarks/mn_recipe.py``), the first the table's
+    recipe on format 1 data: each cell a rate with its interval, and for Mem-0 where its
     classifier declared the subtask ends against the simulator (``rmbench boundaries``)."""
-    res, doc = load("table_state.json"), load("mn_recipe.json")
+    doc = load("mn_recipe.json")
     tasks = [t.name for t in ordered() if any(t.name in c["cells"] for c in doc["candidates"])]
     specs = ["mem0", "mem0:no_key", "mem0:gt_classifier"]
     rows = []
-    for cand in [{"name": "the table's (format 1 data)", "cells": res["cells"]}, *doc["candidates"]]:
+    for cand in doc["candidates"]:
         for task in tasks:
             row = cand["cells"].get(task)
             if row is None:
@@ -215,9 +246,12 @@ def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
             rec = c.get("record", {})
             progress = f"{c['mean_progress']:.3f}" + (f" ({rec['progress']})" if "progress" in rec else "")
             endings = ", ".join(f"{k} {v}" for k, v in c["endings"].items() if v)
-            train = rec.get("train_wall") or minutes(c["train_wall_s"])
+            train = rec.get("train_wall") or ("(Mem-0's checkpoint)" if spec == "mem0:gt_classifier"
+                                              else minutes(c["train_wall_s"]))
+            failures = rec.get("failures") or "; ".join(
+                f"{why} {n}" for why, n in list(c["failure_reasons"].items())[:4])
             rows.append([task.name, f"`{spec}`", f"{c['successes']}/{c['episodes']}", progress, endings,
-                         rec.get("failures", ""), train, rec.get("eval_wall") or minutes(c["eval_wall_s"])])
+                         failures, train, rec.get("eval_wall") or minutes(c["eval_wall_s"])])
     return rows
 
 
@@ -230,7 +264,12 @@ def state_records() -> str:
 
 
 def state_superseded() -> str:
-    return markdown(RECORD_HEADER, _record_rows(load("table_state.json")["superseded"]["cells"]))
+    """The cells a re-run replaced, each group under why it no longer stands."""
+    out = []
+    for group in load("table_state.json")["superseded"]:
+        out.append(f"{group['why'][0].upper()}{group['why'][1:]}:\n\n"
+                   + markdown(RECORD_HEADER, _record_rows(group["cells"])))
+    return "\n".join(out)
 
 
 def state_cost() -> str:
