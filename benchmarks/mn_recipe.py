@@ -9,6 +9,10 @@ the simulator (``rmbench boundaries``).
     python benchmarks/mn_recipe.py --table runs/table_state --name NAME --changes "..." \\
         --tasks press_button --specs mem0,mem0:gt_classifier
 
+A candidate that changes only what a checkpoint's policy does can instead be measured with
+``rmbench eval`` on that checkpoint (``--evaluation DIR``: its folder; the cell is the
+policy's, recorded as Mem-0's).
+
 A candidate recorded again replaces its earlier entry; the file is written atomically.
 """
 
@@ -19,22 +23,40 @@ import json
 from pathlib import Path
 
 from rmbench.suite.records import cell_record
+from rmbench.suite.stages import failure_reasons
 from rmbench.suite.tables import differences
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "mn_recipe.json"
 
 
+def evaluation_table(folder: Path) -> dict:
+    """An `rmbench eval` folder of one mem0 checkpoint as a table with one column, mem0."""
+    run, summary = (json.loads((folder / f).read_text()) for f in ("run.json", "summary.json"))
+    policy = run["policy"]
+    if not policy.startswith("mem0:"):
+        raise SystemExit(f"{folder}: evaluates {policy!r}, not a mem0 checkpoint")
+    cells = {task: {"mem0": {**row, "evaluation": str(folder), "checkpoint": policy[5:],
+                             "failure_reasons": failure_reasons(folder / task / "episodes.jsonl")}}
+             for task, row in summary["tasks"].items()}
+    tasks = " ".join(f"--task {t}" for t in cells)
+    return {"command": f"rmbench eval {tasks} --policy {policy} --episodes {run['episodes']} "
+                       f"--seed {run['seed']} --out {folder}", "plan": None, "cells": cells}
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--table", required=True, help="an `rmbench table` folder (its table.json)")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--table", help="an `rmbench table` folder (its table.json)")
+    source.add_argument("--evaluation", help="an `rmbench eval` folder of a mem0 checkpoint")
     p.add_argument("--name", required=True)
     p.add_argument("--changes", required=True, help="what the candidate changes, in words")
     p.add_argument("--tasks", required=True)
-    p.add_argument("--specs", required=True)
+    p.add_argument("--specs", default="mem0")
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
-    res = json.loads((Path(args.table) / "table.json").read_text())
+    res = (json.loads((Path(args.table) / "table.json").read_text()) if args.table
+           else evaluation_table(Path(args.evaluation)))
     cells = {}
     for task in args.tasks.split(","):
         for spec in args.specs.split(","):

@@ -107,6 +107,25 @@ def test_end_labels_mark_the_last_l_frames_of_each_subtask():
     assert ex[2].keys == ((0, 3), (1, 5)) and ex[2].current == 5
 
 
+def test_delayed_keys_stay_within_the_delay_and_the_episode():
+    from rmbench.policies.mem0.train import delayed
+
+    idx = np.array([0] * 5 + [1] * 5 + [2] * 3)
+    rng = np.random.default_rng(0)
+    x = planner_examples(0, idx, idx, done_index=9)[3]  # after three steps: keys end 4, 9, 12
+    seen = set()
+    for _ in range(200):
+        y = delayed(x, rng, 3, len(idx))
+        assert [s for s, _ in y.keys] == [0, 1, 2] and y.target == x.target
+        for (_, f0), (_, f) in zip(x.keys, y.keys, strict=True):
+            assert f0 <= f <= min(f0 + 3, len(idx) - 1)
+            seen.add(f - f0)
+        assert x.current <= y.current <= len(idx) - 1
+    assert seen == {0, 1, 2, 3}  # every delay drawn; the last key capped at the episode's end
+    with pytest.raises(ValueError, match="planner_key_delay"):
+        replace(TINY, planner_key_delay=-1)
+
+
 def test_event_labels_mark_the_frames_just_after_each_step_ends():
     step = np.array([0, 0, 0, 1, 1, 1, 1, 1, 2, 2])
     assert event_labels(step, 3).tolist() == [0, 0, 0, 1, 1, 1, 0, 0, 1, 1]
@@ -384,7 +403,8 @@ def test_vlm_planner_backend_trains_with_lora(mn_dataset, tmp_path):
     """The upgrade path on a tiny random Llama: LoRA adapters train, the base stays frozen,
     and the checkpoint round-trips into a working policy."""
     pytest.importorskip("peft")
-    cfg = replace(TINY, planner_backend="vlm", planner_steps=40, planner_lr=3e-3)
+    # keys on their end frames: 40 steps are too few to also learn late ones
+    cfg = replace(TINY, planner_backend="vlm", planner_steps=40, planner_lr=3e-3, planner_key_delay=0)
     train_tiny(mn_dataset, tmp_path / "v", steps=1, cfg=cfg)
     report = json.loads((tmp_path / "v" / "training" / "planner.json").read_text())
     # above what no learning reaches: the best constant answer's accuracy on these decisions,

@@ -16,6 +16,7 @@ from rmbench.suite import runner, stages, tables
 from rmbench.suite.plan import (
     Plan,
     applies,
+    bounded,
     check_sets,
     config_for,
     memory_of,
@@ -84,6 +85,25 @@ def test_set_reaches_only_the_configs_with_the_field():
         check_sets(["no_such_field=1"])
     with pytest.raises(ValueError, match="FIELD=VALUE"):
         check_sets(["head_layers"])
+
+
+def test_a_long_recipe_gets_a_folder_name_the_file_system_takes(tmp_path):
+    # the state table's M(n) recipe: 12 --set items
+    sets = ["mem0.head_layers=2", "mem0.execute=20", "relative_actions=false",
+            "mem0.action_patch=3", "state_noise=0.02", 'state_noise_on=["mat_"]',
+            "grasp_pose_input=true", "layout_copies=16", "layout_shift=0.04",
+            "mem0.sample_noise=0", "mem0.end_classifier=event", "mem0.planner_key_delay=12"]
+    plan = Plan(obs="state", tasks=("press_button",), policies=("mem0:no_key",), sets=tuple(sets))
+    other = Plan(obs="state", tasks=("press_button",), policies=("mem0:no_key",),
+                 sets=tuple(sets[:-1] + ["mem0.planner_key_delay=8"]))
+    for make in (plan.train_dir, plan.eval_dir):
+        folder = make(tmp_path, "press_button", "mem0:no_key")
+        assert len(folder.name.encode()) <= 255
+        folder.mkdir(parents=True)  # the file system takes it
+        assert folder != (other.train_dir if make == plan.train_dir else other.eval_dir)(
+            tmp_path, "press_button", "mem0:no_key")  # names stay distinct
+    # a name that fits keeps its old form
+    assert bounded("mem0-s18000-b128") == "mem0-s18000-b128"
 
 
 def test_run_names_and_memory_in_words():

@@ -22,6 +22,7 @@ Folders, per task under the table's ``OUT``::
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -95,6 +96,19 @@ def applies(spec: str, tmc: str) -> bool:
 def run_name(spec: str, steps: int, batch: int, sets: tuple[str, ...] | list[str] = ()) -> str:
     tag = "".join(f"-{s.replace('=', '')}" for s in sets)
     return f"{spec.replace(':', '-')}-s{steps}-b{batch}{tag}".replace("/", "_").replace('"', "")
+
+
+NAME_MAX = 255  # bytes in one path component on Linux and macOS file systems
+
+
+def bounded(name: str) -> str:
+    """``name`` as a folder name: itself when it fits ``NAME_MAX``, else its head and a hash
+    of the whole (a recipe with many ``--set`` items), so distinct names stay distinct and
+    the names that always fitted do not move."""
+    if len(name.encode()) <= NAME_MAX:
+        return name
+    digest = hashlib.sha1(name.encode()).hexdigest()[:10]
+    return name.encode()[:NAME_MAX - 11].decode(errors="ignore") + "-" + digest
 
 
 def policy_fields() -> dict[str, set[str]]:
@@ -273,11 +287,11 @@ class Plan:
 
     def train_dir(self, out: Path, task: str, spec: str) -> Path:
         run = run_name(trained_spec(spec), self.steps, self.batch, self.sets)
-        return Path(out) / task / "train" / f"{run}{self._copies_tag()}"
+        return Path(out) / task / "train" / bounded(f"{run}{self._copies_tag()}")
 
     def eval_dir(self, out: Path, task: str, spec: str) -> Path:
         run = run_name(spec, self.steps, self.batch, self.sets)
-        return Path(out) / task / "eval" / f"{run}{self._copies_tag()}-e{self.episodes}"
+        return Path(out) / task / "eval" / bounded(f"{run}{self._copies_tag()}-e{self.episodes}")
 
     def eval_policy(self, out: Path, task: str, spec: str) -> str:
         """The ``--policy`` argument of the cell's evaluation."""

@@ -25,7 +25,7 @@ from rmbench.policies.feature_cache import FeatureCache, with_features
 from rmbench.policies.mem0.classifier import end_labels, event_labels
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
-from rmbench.policies.mem0.planner import DONE, planner_examples, planner_loss
+from rmbench.policies.mem0.planner import DONE, PlannerExample, planner_examples, planner_loss
 from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import MINILM_DIM, sentence_embeddings
 from rmbench.policies.nn.vision import color_jitter
@@ -178,8 +178,11 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
                             weight_decay=train_cfg.weight_decay)
     rng = np.random.default_rng(train_cfg.seed)
     acc_ema, loss_ema = 0.0, 0.0
+    lengths = [len(ep.subtask_step) for ep in episodes]
     for step in range(cfg.planner_steps):
         picks = [examples[i] for i in rng.integers(len(examples), size=cfg.planner_batch)]
+        if cfg.planner_key_delay:
+            picks = [delayed(x, rng, cfg.planner_key_delay, lengths[x.episode]) for x in picks]
         batch = planner_batch(planner, frames, picks, gen, device)
         for g in opt.param_groups:
             g["lr"] = lr_at(step, cfg.planner_steps, 0.1, cfg.planner_lr, cfg.planner_lr * 0.01)
@@ -203,6 +206,14 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
     planner.train()
     return {"decisions": len(examples), "steps": cfg.planner_steps,
             "train_accuracy": round(correct / len(examples), 4), "final_loss": round(loss_ema, 5)}
+
+
+def delayed(x: PlannerExample, rng: np.random.Generator, most: int, length: int) -> PlannerExample:
+    """``x`` with each key frame, and the decision frame, moved 0..``most`` frames later (within
+    the episode): the frames at which the end classifier may declare those ends."""
+    shift = rng.integers(0, most + 1, size=len(x.keys) + 1)
+    keys = tuple((s, min(f + int(d), length - 1)) for (s, f), d in zip(x.keys, shift[:-1], strict=True))
+    return replace(x, keys=keys, current=min(x.current + int(shift[-1]), length - 1))
 
 
 # (episode, frame indices, jitter generator or None) -> the planner's inputs at those frames
