@@ -10,8 +10,8 @@ the simulator (``rmbench boundaries``).
         --tasks press_button --specs mem0,mem0:gt_classifier
 
 A candidate that changes only what a checkpoint's policy does can instead be measured with
-``rmbench eval`` on that checkpoint (``--evaluation DIR``: its folder; the cell is the
-policy's, recorded as Mem-0's).
+``rmbench eval`` on that checkpoint (``--evaluation DIR``: its folder, recorded as the one
+column ``--specs`` names, beside the candidate's other columns).
 
 A candidate recorded again replaces its earlier entry; the file is written atomically.
 """
@@ -30,13 +30,13 @@ from rmbench.video import write_atomic
 OUT = Path(__file__).resolve().parent / "results" / "mn_recipe.json"
 
 
-def evaluation_table(folder: Path) -> dict:
-    """An `rmbench eval` folder of one mem0 checkpoint as a table with one column, mem0."""
+def evaluation_table(folder: Path, spec: str) -> dict:
+    """An `rmbench eval` folder of one mem0 checkpoint as a table with one column, ``spec``."""
     run, summary = (json.loads((folder / f).read_text()) for f in ("run.json", "summary.json"))
     policy = run["policy"]
     if not policy.startswith("mem0:"):
         raise SystemExit(f"{folder}: evaluates {policy!r}, not a mem0 checkpoint")
-    cells = {task: {"mem0": {**row, "evaluation": str(folder), "checkpoint": policy[5:],
+    cells = {task: {spec: {**row, "evaluation": str(folder), "checkpoint": policy[5:],
                              "failure_reasons": failure_reasons(folder / task / "episodes.jsonl")}}
              for task, row in summary["tasks"].items()}
     tasks = " ".join(f"--task {t}" for t in cells)
@@ -55,8 +55,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--specs", default="mem0")
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
+    if args.evaluation and "," in args.specs:
+        raise SystemExit("--evaluation records one column: give one --specs")
     res = (json.loads((Path(args.table) / "table.json").read_text()) if args.table
-           else evaluation_table(Path(args.evaluation)))
+           else evaluation_table(Path(args.evaluation), args.specs))
     cells = {}
     for task in args.tasks.split(","):
         for spec in args.specs.split(","):
@@ -65,7 +67,14 @@ def main(argv: list[str] | None = None) -> int:
                 raise SystemExit(f"{args.table}: {task} {spec} is not evaluated yet")
             cells.setdefault(task, {})[spec] = cell_record(row, task)
     doc = json.loads(args.out.read_text()) if args.out.exists() else {"candidates": []}
-    entry = {"name": args.name, "changes": args.changes, "command": res.get("command", ""),
+    command = res.get("command", "")
+    if args.evaluation:  # one column at a time: the candidate's other columns stay
+        old = next((c for c in doc["candidates"] if c["name"] == args.name), None)
+        if old is not None:
+            for task, row in old["cells"].items():
+                cells[task] = {**row, **cells.get(task, {})}
+            command = "; ".join(dict.fromkeys(old["command"].split("; ") + [command]))
+    entry = {"name": args.name, "changes": args.changes, "command": command,
              "plan": res.get("plan"), "cells": cells,
              # Mem-0 minus each other column, with Newcombe's 95% interval
              "differences": differences(cells)}
