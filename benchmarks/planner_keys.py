@@ -28,10 +28,7 @@ from rmbench.video import write_atomic
 DELAYS = (0, 2, 4, 6, 8, 10, 12)
 
 
-def decisions(ckpt: str, ds: Dataset, delay: int) -> dict[str, int]:
-    model, cfg, describe = load_mem0(ckpt)
-    done = describe["planner_texts"].index(DONE)
-    frames = planner_frames(ds, cfg)
+def decisions(model, frames, done: int, ds: Dataset, delay: int) -> dict[str, int]:
     right = total = episodes = 0
     for e in range(ds.num_episodes):
         ep = ds.episode(e, cameras=[])
@@ -61,9 +58,10 @@ def main(argv: list[str] | None = None) -> int:
     rows = {}
     for item in args.checkpoint:
         name, _, ckpt = item.partition("=")
-        cfg = load_mem0(ckpt)[1]
+        model, cfg, describe = load_mem0(ckpt)  # once per checkpoint: every delay reads it
+        frames, done = planner_frames(ds, cfg), describe["planner_texts"].index(DONE)
         rows[name] = {"checkpoint": ckpt, "planner_key_delay": cfg.planner_key_delay,
-                      "delays": [decisions(ckpt, ds, d) for d in DELAYS]}
+                      "delays": [decisions(model, frames, done, ds, d) for d in DELAYS]}
         for r in rows[name]["delays"]:
             print(f"{name} delay {r['delay']:2d}: decisions {r['decisions_right']}/{r['decisions']}, "
                   f"episodes all right {r['episodes_all_right']}/{r['episodes']}")

@@ -64,18 +64,15 @@ def main(argv: list[str] | None = None) -> int:
     report = fit_planner(model, Dataset(args.dataset), cfg, TrainConfig(seed=args.seed),
                          describe["planner_texts"].index(DONE), False)
     model.eval()
+    step = describe["step"]
     describe = {k: v for k, v in describe.items() if k not in ("step", "format")}
     describe["config"] = cfg.to_dict()
     describe["planner_refit"] = {"from": str(args.checkpoint), "set": changes, "report": report}
     if args.out.exists():
         shutil.rmtree(args.out)
-    save_checkpoint(args.out, model, describe, read_step(args.checkpoint))
+    save_checkpoint(args.out, model, describe, step)
     print(json.dumps(report))
     return 0
-
-
-def read_step(folder: str) -> int:
-    return json.loads((Path(folder) / "config.json").read_text())["step"]
 
 
 if __name__ == "__main__":
