@@ -4,7 +4,10 @@ state observation (vs the distance between layouts' first frames; "core" leaves 
 headings of symmetric pieces), the largest difference of the arms' joints (rad, grippers
 apart), and how far the expert's subsequent actions diverge.
 
-    python benchmarks/aliasing.py [--seed 100000] [--out benchmarks/results/aliasing.json]
+    python benchmarks/aliasing.py [--seed 100000] [--tasks T ...]
+        [--out benchmarks/results/aliasing.json]
+
+``--tasks`` measures those tasks again and keeps the other rows of ``--out`` (same seed).
 """
 
 from __future__ import annotations
@@ -23,11 +26,23 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=100000)
     ap.add_argument("--out", default="benchmarks/results/aliasing.json")
+    ap.add_argument("--tasks", nargs="+", default=None, help="measure only these (default: all)")
     args = ap.parse_args()
+    out = Path(args.out)
+    kept = {}
+    if args.tasks is not None and out.exists():
+        saved = json.loads(out.read_text())
+        if saved["seed"] != args.seed:
+            raise SystemExit(f"{out} was measured at seed {saved['seed']}, not {args.seed}")
+        kept = {r["task"]: r for r in saved["tasks"]}
     rows = []
     print(f"{'task':<20} {'TMC':<5} {'alias px':>9} {'unrelated px':>13} {'ratio':>6} "
           f"{'state':>7} {'core':>6} {'arms':>6} {'action div':>10}  next subtasks")
     for cls in ordered():
+        if args.tasks is not None and cls.name not in args.tasks:
+            if cls.name in kept:
+                rows.append(kept[cls.name])
+            continue
         r = measure(cls.name, seed=args.seed)
         rows.append({**r.to_dict(), "tmc": cls.tmc})
         same = r.next_subtasks[0] == r.next_subtasks[1]
@@ -35,7 +50,6 @@ def main() -> None:
         print(f"{r.task:<20} {cls.tmc:<5} {r.pixel_distance:>9.3f} {r.unrelated_distance:>13.3f} "
               f"{r.ratio:>6.3f} {r.state_ratio:>7.3f} {r.state_ratio_core:>6.3f} {r.arm_gap:>6.3f} "
               f"{r.action_divergence:>10.3f}  {nxt}", flush=True)
-    out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(f".tmp{os.getpid()}")
     tmp.write_text(json.dumps({"seed": args.seed, "camera": "head 320x240", "tasks": rows},

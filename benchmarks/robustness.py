@@ -6,8 +6,9 @@ tables of docs/results/robustness.md (rendered by scripts/render_docs.py).
 
 Each (task, kind, sigma) cell is its own JSON file in benchmarks/results/robustness/, written
 atomically when the cell is done, so an interrupted run re-run with the same arguments does
-only the missing cells. The clean expert (sigma 0) is a cell too. ``--render-only`` rewrites
-the doc's tables from the cells there are.
+only the missing cells, and those of an earlier task version (the gym id a cell records).
+The clean expert (sigma 0) is a cell too. ``--render-only`` rewrites the doc's tables from
+the cells there are.
 
 The experts' bar, the cells run first: on 100 seeds, >= 90% under smooth 0.02 (tau 0.5 s) and
 offset 0.02, >= 95% under white 0.01, 100% without noise; no expert raises.
@@ -23,7 +24,7 @@ from pathlib import Path
 
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.robustness import sweep
-from rmbench.tasks.registry import ordered
+from rmbench.tasks.registry import get_task, ordered
 from rmbench.video import write_atomic
 
 ROOT = Path(__file__).resolve().parent
@@ -42,8 +43,8 @@ def run_cell(task: str, kind: str, sigma: float, episodes: int, seed: int, worke
     t0 = time.perf_counter()
     result = sweep(task, [sigma], kind=kind, tau=tau, episodes=episodes, seed=seed,
                    workers=workers)[0]
-    cell = {"task": task, "seed": seed, "wall_s": round(time.perf_counter() - t0, 1),
-            **result.to_dict()}
+    cell = {"task": task, "gym_id": get_task(task).gym_id, "seed": seed,
+            "wall_s": round(time.perf_counter() - t0, 1), **result.to_dict()}
     cell["command"] = (f"rmbench robustness {task} --kind {kind} --noise {sigma:g} "
                        f"--episodes {episodes} --seed {seed}"
                        + (f" --tau {tau:g}" if kind == "smooth" else ""))
@@ -75,8 +76,11 @@ def main() -> None:
         for kind, sigma in todo:
             for task in args.tasks:
                 old = cell_path(task, kind, sigma)
-                if old.exists() and json.loads(old.read_text())["episodes"] >= args.episodes:
-                    continue
+                if old.exists():  # cells written before versions were kept count as current
+                    saved = json.loads(old.read_text())
+                    if (saved["episodes"] >= args.episodes
+                            and saved.get("gym_id", get_task(task).gym_id) == get_task(task).gym_id):
+                        continue
                 c = run_cell(task, kind, sigma, args.episodes, args.seed, args.workers, args.tau)
                 print(f"{task:<20} {kind:<6} {sigma:<5g} {c['successes']:>3}/{c['episodes']}"
                       f"  {c['wall_s']:.0f}s", flush=True)

@@ -87,7 +87,7 @@ def _state_rows(res: dict, specs: list[str], extra: Callable[[str], list] = lamb
         row = cells[task.name]
         groups.setdefault(task.tmc, []).append(task.name)
         rows.append([task.name, task.tmc]
-                    + [(rate(row.get(s)) + _older(task.tmc, s, row.get(s)))
+                    + [(rate(row.get(s)) + _older(task.name, s, row.get(s)))
                        if applies(s, task.tmc) else "n/a" for s in specs]
                     + extra(task.name))
         if task.name == [t.name for t in ordered() if t.tmc == task.tmc][-1]:
@@ -98,23 +98,38 @@ def _state_rows(res: dict, specs: list[str], extra: Callable[[str], list] = lamb
     return rows
 
 
-def _older(tmc: str, spec: str, cell: dict | None) -> str:
-    """' †' for a Mem-0 cell of an M(n) row trained on datasets older than the current
-    format: its planner and end classifier learnt another subtask layout (CHANGELOG.md).
-    M(1) Mem-0 runs one subtask, the goal, and DP and ACT read no subtask: the format
-    changes nothing they learn."""
-    old = tmc == "M(n)" and spec.startswith("mem0") and cell is not None \
-        and cell.get("dataset") != FORMAT
-    return " †" if old else ""
-
-
-def _footnote(table: str, lead: str = "†") -> str:
-    """The † note under a table that marks cells trained on older datasets."""
-    if "†" not in table and lead == "†":
+def _older(task: str, spec: str, cell: dict | None) -> str:
+    """The marks of a cell measured before the current task or data (CHANGELOG.md): ' †' for
+    a Mem-0 cell of an M(n) row trained on datasets older than the current format (its
+    planner and end classifier learnt another subtask layout; M(1) Mem-0 runs one subtask,
+    the goal, and DP and ACT read no subtask: the format changes nothing they learn); ' ‡'
+    for any cell run on an earlier version of its task (the gym id it records)."""
+    if cell is None:
         return ""
-    return (f"\n{lead} trained on datasets older than format `{FORMAT}`, where a subtask repeated "
-            "back to back was one subtask (CHANGELOG.md, 2026-11-27); not re-run on the "
-            "current data yet.\n")
+    cls = get_task(task)
+    marks = ""
+    if cls.tmc == "M(n)" and spec.startswith("mem0") and cell.get("dataset") != FORMAT:
+        marks += "†"
+    if cell.get("gym_id", cls.gym_id) != cls.gym_id:
+        marks += "‡"
+    return f" {marks}" if marks else ""
+
+
+def _footnote(table: str, lead: str = "", marks: str | None = None) -> str:
+    """The notes under a table for the marks it holds, or for ``marks`` with ``lead`` (how a
+    table that leaves such cells out says so, instead of the marks)."""
+    marks = ("†" if "†" in table else "") + ("‡" if "‡" in table else "") if marks is None else marks
+    notes = []
+    if "†" in marks:
+        notes.append(f"{lead or '†'} trained on datasets older than format `{FORMAT}`, where a "
+                     "subtask repeated back to back was one subtask (CHANGELOG.md, 2026-11-27); "
+                     "not re-run on the current data yet.")
+    if "‡" in marks:
+        notes.append(f"{lead + ' run' if lead else '‡'} on an earlier version of the task "
+                     "(CHANGELOG.md, 2026-11-28: battery_try-v1 counted a try while the arm "
+                     "that made it was still over the holder); not re-run on the current "
+                     "version yet.")
+    return "".join(f"\n{n}\n" for n in notes)
 
 
 def _average(res: dict, specs: list[str], tasks: list[str], name: str, group: str) -> list[str]:
@@ -125,9 +140,10 @@ def _average(res: dict, specs: list[str], tasks: list[str], name: str, group: st
             out.append("n/a" if not all(applies(s, g) for g in ({group} if group else {"M(1)", "M(n)"}))
                        else "—")
         else:
-            older = any(_older(get_task(t).tmc, s, v) for t, v in zip(tasks, vals, strict=True))
+            older = "".join(sorted({m for t, v in zip(tasks, vals, strict=True)
+                                    for m in _older(t, s, v).strip()}))
             out.append(f"{100 * sum(v['success_rate'] for v in vals) / len(vals):.1f}"
-                       + (" †" if older else ""))
+                       + (f" {older}" if older else ""))
     return out
 
 
@@ -188,12 +204,20 @@ def state_differences() -> str:
     res = load("table_state.json")
     specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
              "mem0:gt_classifier"]
-    # a difference only between cells trained on the same dataset format
-    cells = {t: {s: c for s, c in row.items()
-                 if _older(get_task(t).tmc, s, c) == _older(get_task(t).tmc, "mem0", row["mem0"])}
-             for t, row in res["cells"].items()}
+    # a difference only between cells measured on the same data format and task version
+    cells, left_out = {}, set()
+    for t, row in res["cells"].items():
+        base = _older(t, "mem0", row["mem0"])
+        cells[t] = {s: c for s, c in row.items() if _older(t, s, c) == base}
+        for c_mark in (_older(t, s, c) for s, c in row.items()):
+            left_out |= set(c_mark.strip()) ^ set(base.strip())  # what kept a pair apart
     lines = difference_table({"cells": cells, "differences": differences(cells)}, specs)
-    return "\n".join(lines) + "\n" + _footnote("\n".join(lines), "— where one of the two cells is")
+    for t, row in res["cells"].items():  # a row measured on an earlier task version says so
+        if "‡" in _older(t, "mem0", row["mem0"]):
+            lines = [line.replace(f"| {t} |", f"| {t} ‡ |", 1) for line in lines]
+    text = "\n".join(lines) + "\n"
+    return (text + _footnote(text, "— where one of the two cells is", "".join(sorted(left_out)))
+            + _footnote(text, marks="‡" if "‡" in text else ""))
 
 
 def mn_recipe() -> str:
@@ -216,9 +240,12 @@ def mn_recipe() -> str:
             verdicts = ("on_time", "early", "late", "missed", "false")
             ends = ("—" if not all(runs) else
                     "/".join(str(sum(r[v] for r in runs)) for v in verdicts))
-            rows.append([cand["name"], task, *(rate(row.get(s)) for s in specs), ends])
-    return markdown(["recipe", "task", "Mem-0", "`no_key`", "`gt_classifier`",
-                     "Mem-0's ends: on time/early/late/missed/false"], rows)
+            version = "".join(_older(task, s, row.get(s)).strip("† ") for s in specs)
+            rows.append([cand["name"], task + (" ‡" if version else ""),
+                         *(rate(row.get(s)) for s in specs), ends])
+    table = markdown(["recipe", "task", "Mem-0", "`no_key`", "`gt_classifier`",
+                      "Mem-0's ends: on time/early/late/missed/false"], rows)
+    return table + _footnote(table)
 
 
 def memory_probe() -> str:

@@ -277,6 +277,17 @@ def test_bad_arguments_give_one_line_errors(ckpt, tmp_path):
     with pytest.raises(CheckpointError, match="trained on observe_and_pickup"):
         policy_cls(str(path), env)
     env.close()
+    # the checkpoint records its demonstrations' task version, and refuses another
+    env = make("observe_and_pickup", render=False)
+    config = json.loads((path / "config.json").read_text())
+    assert config["gym_id"] == env.unwrapped.task.gym_id
+    (path / "config.json").write_text(json.dumps({**config, "gym_id": "rmbench/Old-v0"}))
+    try:
+        with pytest.raises(CheckpointError, match=r"trained on rmbench/Old-v0 demonstrations"):
+            policy_cls(str(path), env)
+    finally:
+        (path / "config.json").write_text(json.dumps(config))
+        env.close()
 
 
 def test_baseline_through_the_evaluation_harness(ckpt, tmp_path):

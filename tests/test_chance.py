@@ -6,6 +6,7 @@ import pytest
 from rmbench.eval.chance import (
     BATTERY_FLIP_STEPS,
     BATTERY_INSERTS,
+    BATTERY_LIT_STEPS,
     absorbed,
     battery_flips,
     chance,
@@ -36,21 +37,29 @@ def test_one_guess_among_identical_places():
 
 
 def test_battery_flips_match_a_simulated_random_walk():
-    assert battery_flips(100, (150, 150)) == 0.0  # no flip fits
-    assert battery_flips(150, (150, 150)) == pytest.approx(1 / 3)  # the first, left: (1,0)
-    assert battery_flips(600, (150, 150)) == pytest.approx(3 / 4)  # four flips
+    from rmbench.tasks.battery_try import BatteryTry
+
+    assert battery_flips(100, (150, 150), (150, 150)) == 0.0  # no flip fits
+    # one flip: the left one finds (1,0), the right one (0,1)
+    assert battery_flips(150, (150, 150), (150, 150), left=1.0) == pytest.approx(1 / 3)
+    assert battery_flips(150, (150, 150), (150, 150), left=0.5) == pytest.approx(1 / 3)
+    # a failed flip costs more than a lit one: two flips need 200 + 150
+    assert battery_flips(349, (200, 200), (150, 150), left=0.5) == pytest.approx(1 / 3)
+    assert battery_flips(350, (200, 200), (150, 150), left=0.5) > 1 / 3
     rng = np.random.default_rng(0)
     pairs, hits, n = ((1, 0), (1, 1), (0, 1)), 0, 20000
     for _ in range(n):
-        correct, state, left = pairs[rng.integers(3)], [0, 0], 1000.0 - BATTERY_INSERTS
-        first = True  # the expert's flip of the left cell
-        while tuple(state) != correct:
-            k, first = (0 if first else rng.integers(2)), False
+        correct, state = pairs[rng.integers(3)], [0, 0]
+        left = BatteryTry.step_limit - BATTERY_INSERTS
+        while True:
+            k = rng.integers(2)
+            state[k] ^= 1
+            if tuple(state) == correct:
+                hits += BATTERY_LIT_STEPS[k] <= left
+                break
             left -= BATTERY_FLIP_STEPS[k]
             if left < 0:
                 break
-            state[k] ^= 1
-        hits += tuple(state) == correct
     assert chance("battery_try").rate == pytest.approx(hits / n, abs=0.01)
 
 

@@ -268,6 +268,20 @@ def test_every_push_of_press_button_is_its_own_subtask():
     env.close()
 
 
+def test_a_dataset_of_another_task_version_is_refused_and_not_extended(dataset, tmp_path):
+    root = copy(dataset, tmp_path)
+    meta = json.loads((root / L.RMBENCH).read_text())
+    old = meta["gym_id"].rsplit("-v", 1)[0] + "-v0"
+    (root / L.RMBENCH).write_text(json.dumps({**meta, "gym_id": old}))
+    with pytest.raises(DatasetError, match=rf"collected on '{old}'.*collect it again") as err:
+        check_dataset(root)
+    assert "\n" not in str(err.value)
+    with pytest.raises(DatasetError, match=rf"another dataset format or task version \(gym_id "
+                                           rf"'{old}' there"):
+        collect(small(root, episodes=4))
+    assert json.loads((root / L.RMBENCH).read_text())["gym_id"] == old  # nothing was touched
+
+
 def test_a_dataset_of_the_previous_format_is_refused_in_one_line(dataset, tmp_path):
     root = copy(dataset, tmp_path)
     meta = json.loads((root / L.RMBENCH).read_text())

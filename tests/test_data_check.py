@@ -72,6 +72,8 @@ REFUSALS = {
     "subtask end": r"subtask_end flags do not mark",
     "subtask step": r"subtask_step does not count the plan's steps up from 0",
     "format": r"rmbench\.json: dataset format 'rmbench/1'",
+    "task version": r"rmbench\.json: collected on 'rmbench/\w+-v0', this rmbench's",
+    "unknown task": r"rmbench\.json: unknown task 'nope'",
     "required feature": r"info\.json: no feature '[\w.]+'",
     "subtask within a step": r"subtask_index changes within a plan step",
     "video missing": r"file-001\.mp4: missing",
@@ -189,6 +191,9 @@ def corruptions(dataset):
     add("rmbench: no task", edit_json(L.RMBENCH, lambda d: d.pop("task")))
     add("rmbench: task number", edit_json(L.RMBENCH, lambda d: d.update(task=1)))
     add("rmbench: format", edit_json(L.RMBENCH, lambda d: d.update(format="rmbench/1")))
+    add("rmbench: task version", edit_json(
+        L.RMBENCH, lambda d: d.update(gym_id=d["gym_id"].rsplit("-v", 1)[0] + "-v0")))
+    add("rmbench: unknown task", edit_json(L.RMBENCH, lambda d: d.update(task="nope")))
     add("stats: not an object", edit_json(L.STATS, lambda d: [d], replace=True))
     add("stats: no action", edit_json(L.STATS, lambda d: d.pop(L.ACTION)))
     add("tasks: no task_index", edit_parquet(L.TASKS, drop("task_index")))

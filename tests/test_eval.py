@@ -138,6 +138,17 @@ def test_other_arguments_on_the_same_folder_are_refused(tmp_path):
         evaluate(cfg(tmp_path, policy="random", episodes=1))
 
 
+def test_a_task_folder_of_another_task_version_is_not_resumed(tmp_path):
+    summary = evaluate(cfg(tmp_path, policy="noop", episodes=1))
+    version = tmp_path / "out" / TASK / "version.json"
+    gym_id = json.loads(version.read_text())["gym_id"]
+    assert summary["tasks"][TASK]["gym_id"] == gym_id
+    version.write_text(json.dumps({"gym_id": gym_id + "-old"}))
+    with pytest.raises(EvalError, match=rf"holds episodes of {gym_id}-old, this rmbench's"):
+        evaluate(cfg(tmp_path, policy="noop", episodes=1))
+    assert len(records(tmp_path)) == 1
+
+
 def test_replay_of_a_dataset_succeeds_on_its_own_seeds(dataset, tmp_path):
     summary = evaluate(cfg(tmp_path, policy=f"replay:{dataset}"))
     assert summary["tasks"][TASK]["successes"] == 3

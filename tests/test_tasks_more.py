@@ -125,6 +125,26 @@ def test_battery_lamp_only_for_the_correct_pair():
     assert ev.progress == 1.0 and ev.stage == len(task.plan())  # solved off its plan
 
 
+def test_battery_counts_a_try_only_with_both_arms_home():
+    """The frame a try is counted at must not show which arm made it (battery_try-v2)."""
+    from rmbench.sim.station import home_action
+
+    env, task = task_env("battery_try", seed=7)
+    sim = env.unwrapped.sim
+    away = home_action()
+    away[1] += 0.3  # the left shoulder: the left gripper well off its home point
+    sim.reset_robot(away)
+    insert(task, 0, 0)
+    insert(task, 1, 0)
+    settle(env)
+    ev = task.evaluate()
+    assert not ev.predicates["hands_home"] and ev.stage == 0
+    sim.reset_robot()
+    settle(env)
+    ev = task.evaluate()
+    assert ev.predicates["hands_home"] and ev.stage == 2
+
+
 def test_swap_t_pose_check_and_tipping():
     env, task = task_env("swap_T", seed=8)
     left, right = task.blocks

@@ -78,7 +78,8 @@ class AliasingResult:
 def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
             width: int = 320, height: int = 240, render: bool = True) -> Moment:
     """Roll the expert from ``seed`` with ``hidden`` fixed until its ``segment``-th segment
-    start after the env reached ``stage``; return the head frame (``render``) and the state
+    start after the env reached ``stage`` (``segment`` 0: the first frame at that stage, the
+    one a planner chooses the next step at); return the head frame (``render``) and the state
     observation there, and what follows."""
     env = make(task, render=False)
     try:
@@ -92,9 +93,9 @@ def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
         actions: list[np.ndarray] = []
         for t in range(env.unwrapped.step_limit):
             action = expert.act(obs)
-            if not found and reached and expert.segment_start:
+            if not found and reached and (segment == 0 or expert.segment_start):
                 seen += 1
-                if seen == segment:
+                if seen == max(segment, 1):
                     found, step = True, t
                     state = env.unwrapped.task.environment_state()
                     joints = np.asarray(obs["agent_pos"], dtype=float)

@@ -17,6 +17,7 @@ import pyarrow.parquet as pq
 from rmbench.data import layout as L
 from rmbench.data.stats import from_json
 from rmbench.data.writer import DatasetError
+from rmbench.tasks.registry import UnknownTaskError, get_task
 from rmbench.video import decode_video
 
 VECTOR_KEYS = (L.STATE, L.EE_POSE, L.ACTION)
@@ -174,6 +175,7 @@ class Dataset:
             raise DatasetError(
                 f"{self.root / L.RMBENCH}: dataset format {self.rmbench.get('format')!r}, this rmbench "
                 f"reads {L.FORMAT!r} (one subtask per plan step): collect it again with rmbench collect")
+        self._check_version()
         self.features: dict[str, dict] = self.info["features"]
         self.fps: int = self.info["fps"]
         self.cameras = [k[len(L.IMAGE_PREFIX):] for k, f in self.features.items()
@@ -181,9 +183,27 @@ class Dataset:
         self.instructions: list[str] = _names(self.root / L.TASKS, "task", "task_index")
         self.subtasks: list[str] = _names(self.root / L.SUBTASKS, "subtask", "subtask_index")
 
+    def _check_version(self) -> None:
+        """A dataset serves only the task version it was collected on: a change to a task's
+        plan or its subtask ends (CHANGELOG.md) bumps the version in its gym id."""
+        try:
+            current = get_task(self.rmbench["task"]).gym_id
+        except UnknownTaskError as err:
+            raise DatasetError(f"{self.root / L.RMBENCH}: {err.args[0]}") from None
+        if self.rmbench.get("gym_id") != current:
+            raise DatasetError(
+                f"{self.root / L.RMBENCH}: collected on {self.rmbench.get('gym_id')!r}, this "
+                f"rmbench's {self.rmbench['task']} is {current!r} (CHANGELOG.md): collect it "
+                f"again with rmbench collect")
+
     @property
     def task(self) -> str:
         return self.rmbench["task"]
+
+    @property
+    def gym_id(self) -> str:
+        """The task version the demonstrations were collected on (``rmbench/Task-vN``)."""
+        return self.rmbench["gym_id"]
 
     @property
     def state_names(self) -> list[str] | None:

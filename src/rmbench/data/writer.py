@@ -232,6 +232,12 @@ class DatasetWriter:
         except (OSError, json.JSONDecodeError) as err:
             raise DatasetError(f"{self.root / L.RMBENCH} is unreadable ({err}); pass --overwrite "
                                f"to start over") from err
+        layout = {"format": L.FORMAT, "gym_id": self.task.gym_id}
+        what = differences({k: saved.get(k) for k in layout}, layout)
+        if what:  # another layout or task version: its episodes cannot join these
+            raise DatasetError(f"{self.root} holds another dataset format or task version "
+                               f"({what}); collect into another folder, or --overwrite to "
+                               f"start over")
         what = differences(saved.get("collection", {}), self.collection)
         if what:
             raise DatasetError(f"{self.root} was collected with other arguments ({what}); run "

@@ -13,9 +13,9 @@ observe_and_pickup (a fixed-seed sample of its tables, the posterior of each exa
 
 Trial-and-error tasks allow as many tries as the step limit leaves after the expert's own
 durations: measured on 10 demonstrations per task (``rmbench collect TASK --episodes 10
---seed 0``, subtask segments), battery_try's two inserts take 311 steps and a flip 184 (left,
-with the wait above the holder that makes the tries look alike) or 132 (right) on average
-(four flips fit in 1000), a swap and its press in
+--seed 0``, subtask segments), battery_try's two inserts take 367 steps, a flip that fails
+200 (left) or 203 (right) with the arm's way back home, and one that lights the lamp 147 or
+151 (it ends as the cell goes in; three flips fit in 1000), a swap and its press in
 blocks_ranking_try 451-511 (7 fit in 3500), a move in swap_blocks 149-191 before a press of
 85 (5 moves fit in 1000).
 """
@@ -29,8 +29,9 @@ from functools import cache
 import numpy as np
 
 # what the step limit leaves a perfect guesser (measured as the module docstring says)
-BATTERY_INSERTS = 311  # steps to insert both cells
-BATTERY_FLIP_STEPS = (184.3, 132.0)  # mean steps of a left and of a right flip
+BATTERY_INSERTS = 367  # steps to insert both cells, both arms back home
+BATTERY_FLIP_STEPS = (199.7, 203.3)  # mean steps of a left and a right flip that fails ...
+BATTERY_LIT_STEPS = (147.3, 151.0)  # ... and that lights the lamp (no way back)
 RANKING_SWAPS = 7
 SWAP_BLOCKS_MOVES = 5
 
@@ -92,10 +93,12 @@ def _swap_T() -> Chance:
 def _battery_try() -> Chance:
     from rmbench.tasks.battery_try import BatteryTry
 
-    rate = battery_flips(BatteryTry.step_limit - BATTERY_INSERTS)
-    return Chance(rate, "insert both positive first and flip the left battery (as every "
-                        "demonstration does), then the left or the right at random while the "
-                        "lamp stays off; four flips fit")
+    budget = BatteryTry.step_limit - BATTERY_INSERTS
+    rate, left = max((battery_flips(budget, left=q / 100), q / 100) for q in range(101))
+    return Chance(rate, f"insert both positive first, then flip the left battery with "
+                        f"probability {left:.2f} and the right otherwise while the lamp stays "
+                        f"off (after the inserts and after every failed try the arms are home, "
+                        f"the lamp is off and the holder hides the cells' ends)")
 
 
 def _blocks_ranking_try() -> Chance:
@@ -156,29 +159,27 @@ def absorbed(step: np.ndarray, start: np.ndarray, good: np.ndarray, steps: int) 
     return total
 
 
-def battery_flips(budget: float, cost: tuple[float, float] = BATTERY_FLIP_STEPS) -> float:
-    """battery_try: both cells go in positive first and the first flip is the expert's, of
-    the left cell (the view after the inserts, the right arm still over its slot, is like no
-    later one); after a failed try every view is the same, so each later flip is of the left
-    or the right cell with probability 1/2 (alike by symmetry). A flip counts if it ends
-    within ``budget`` steps (``cost``: a left and a right flip's steps)."""
+def battery_flips(budget: float, fail: tuple[float, float] = BATTERY_FLIP_STEPS,
+                  lit: tuple[float, float] = BATTERY_LIT_STEPS, left: float = 0.5) -> float:
+    """battery_try: both cells go in positive first; after the inserts and after every failed
+    try the view is the same (both arms home, lamp off, the cells' ends hidden), so every flip
+    is of the left cell with one probability ``left`` and of the right otherwise. A flip
+    that lights the lamp counts if it ends within what ``budget`` has left (``lit``: its steps
+    for the left and the right cell); one that fails costs ``fail``."""
 
-    def hit(state, correct, left):
-        if state == correct:
-            return 1.0
+    def hit(state, correct, remaining):
         total = 0.0
-        for k in (0, 1):
-            if cost[k] <= left:
-                moved = tuple(b ^ (i == k) for i, b in enumerate(state))
-                total += 0.5 * hit(moved, correct, left - cost[k])
+        for k, p in ((0, left), (1, 1.0 - left)):
+            moved = tuple(b ^ (i == k) for i, b in enumerate(state))
+            if moved == correct:
+                total += p * (lit[k] <= remaining)
+            elif fail[k] <= remaining:
+                total += p * hit(moved, correct, remaining - fail[k])
         return total
 
-    from rmbench.tasks.battery_try import PAIRS, TRIES, flips
+    from rmbench.tasks.battery_try import PAIRS, TRIES
 
-    first = flips(PAIRS[-1])[0]  # the cell the expert's first flip turns
-    if cost[first] > budget:
-        return 0.0
-    return sum(hit(TRIES[1], correct, budget - cost[first]) for correct in PAIRS) / len(PAIRS)
+    return sum(hit(TRIES[0], correct, budget) for correct in PAIRS) / len(PAIRS)
 
 
 def swapped(order: tuple, pair: tuple[int, int]) -> tuple:

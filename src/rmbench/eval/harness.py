@@ -132,6 +132,7 @@ class TaskResult:
     endings: dict[str, int] = field(default_factory=dict)
     success_ci95: list[float] | None = None  # Wilson 95% interval of success_rate
     memory_reset: dict[str, dict] = field(default_factory=dict)  # probe name -> eval.probe.compare
+    gym_id: str = ""  # the task version the episodes ran on
 
 
 def summarize(task: str, records: list[dict]) -> TaskResult:
@@ -140,7 +141,8 @@ def summarize(task: str, records: list[dict]) -> TaskResult:
     endings = {e: sum(r["reason"] == e for r in records) for e in ENDINGS}
     return TaskResult(task, get_task(task).tmc, n, ok, round(ok / n, 4) if n else 0.0,
                       round(sum(r["progress"] for r in records) / n, 4) if n else 0.0, endings,
-                      [round(v, 4) for v in wilson(ok, n)] if n else None)
+                      [round(v, 4) for v in wilson(ok, n)] if n else None,
+                      gym_id=get_task(task).gym_id)
 
 
 def _check_identity(out: Path, cfg: EvalConfig) -> None:
@@ -168,8 +170,26 @@ def evaluate(cfg: EvalConfig) -> dict[str, Any]:
     return summary
 
 
+def _check_version(folder: Path, task: str) -> None:
+    """A task folder holds episodes of one task version: a folder written on another (its
+    ``version.json``) is refused, never resumed. Folders written before versions were kept
+    have none and resume as before."""
+    path, gym_id = folder / "version.json", get_task(task).gym_id
+    if path.exists():
+        try:
+            saved = json.loads(path.read_text()).get("gym_id")
+        except (OSError, json.JSONDecodeError, AttributeError) as err:
+            raise EvalError(f"{path} is unreadable ({err}); use another --out") from None
+        if saved != gym_id:
+            raise EvalError(f"{folder} holds episodes of {saved}, this rmbench's {task} is "
+                            f"{gym_id} (CHANGELOG.md); use another --out")
+    else:
+        write_atomic(path, (json.dumps({"gym_id": gym_id}) + "\n").encode())
+
+
 def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
     folder.mkdir(parents=True, exist_ok=True)
+    _check_version(folder, task)
     entry, arg = parse_spec(cfg.policy)
     # one executor for the seed search and the episodes: its workers keep their env
     executor = make_executor(cfg.workers, cfg.backend, on_close=close_worker)

@@ -15,8 +15,7 @@ from rmbench.tasks.battery_try import PAIRS, SLOT_TOL, TRIES
 
 OPENING = 0.5  # enough for a 24 mm cell, narrow beside the holder's plates
 AWAY = np.pi / 2  # yaw of a positive end pointing away from the robot
-READY_YAW = 0.0  # the waiting gripper's yaw, across a cell lying along y as the slots hold it
-SETTLE = 10  # steps the waiting arm holds, for its servos to settle whatever it did before
+SETTLE = 10  # steps an arm back home holds, for its servos to settle there
 HOVER = 0.08  # halfway down (where a set-down is lined up) a held cell still clears the plates
 
 
@@ -49,18 +48,16 @@ class BatteryTryExpert(ScriptedExpert):
                                turn_to=lambda grip: wrap_angle(target_yaw - (grip - np.pi / 2)),
                                placed=seated)
 
-        # Each arm inserts the battery on its side; the left arm then makes every flip, so the
-        # arms trade places once instead of before every try.
-        yield from self.label(0, move(0, AWAY, "left"))
-        yield from self.label(1, move(1, AWAY, "right"))
-        ready = (*task.holder.xy(model), TABLE_TOP + 0.15)
+        def step(k, target_yaw, side):
+            # every step ends with its arm back home, where the task counts it; the hold lets
+            # the servos settle there, so the next step always starts from one pose
+            return chain(move(k, target_yaw, side), m.go_home(side), m.hold(SETTLE))
+
+        # Each arm inserts the battery on its side; the left arm then makes every flip.
+        yield from self.label(0, step(0, AWAY, "left"))
+        yield from self.label(1, step(1, AWAY, "right"))
         for before, after in zip(TRIES, PAIRS, strict=False):
             if task.lamp.state == "green":
                 break
             k = 0 if before[0] != after[0] else 1
-            if "left" in m.away:  # between tries the arm waits above the holder in one pose:
-                # its wrist must not keep the turn of the last flip, which would tell the tries
-                # apart without memory
-                yield from self.label(2 + k, chain(m.approach("left", ready, READY_YAW, park=True),
-                                                   m.hold(SETTLE)))
-            yield from self.label(2 + k, move(k, AWAY if after[k] == 0 else -AWAY, "left"))
+            yield from self.label(2 + k, step(k, AWAY if after[k] == 0 else -AWAY, "left"))

@@ -52,6 +52,21 @@ def read_config(folder: str | Path, policy: str | None = None) -> dict[str, Any]
     return config
 
 
+def check_task(folder: str | Path, describe: dict[str, Any], env) -> None:
+    """A checkpoint runs only on the task it was trained on, and only on that task's version
+    (its gym id): a version changes what the demonstrations showed (CHANGELOG.md).
+    Checkpoints saved before versions were recorded name the task alone."""
+    if env is None:
+        return
+    task = env.unwrapped.task
+    if type(task).name != describe["task"]:
+        raise CheckpointError(f"{folder} was trained on {describe['task']}, not {type(task).name}")
+    trained = describe.get("gym_id")
+    if trained is not None and trained != task.gym_id:
+        raise CheckpointError(f"{folder} was trained on {trained} demonstrations, this rmbench's "
+                              f"{type(task).name} is {task.gym_id} (CHANGELOG.md): train it again")
+
+
 def saved_step(folder: str | Path) -> int | None:
     """The training step of the complete checkpoint in ``folder``: its config and readable
     weights of one step; None when either is missing, unreadable or of another step."""

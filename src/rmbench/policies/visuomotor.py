@@ -34,6 +34,7 @@ from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import (
     CheckpointError,
+    check_task,
     load_weights,
     read_config,
     save_checkpoint,
@@ -205,6 +206,7 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
     task = get_task(ds.task)
     cfg = replace(cfg, observation=choose(cfg.observation, ds))
     describe = {"policy": policy, "config": cfg.to_dict(), "task": task.name, "tmc": task.tmc,
+                "gym_id": ds.gym_id,
                 "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
                             "frames": ds.num_frames}}
     if cfg.reads_state:
@@ -258,9 +260,7 @@ class VisuomotorPolicy(BasePolicy):
             raise CheckpointError(f"{path}: {err}") from None
         model = self.model_cls(cfg, len(describe.get("state_names") or ()))
         load_weights(path, model, describe["step"])
-        if env is not None and type(env.unwrapped.task).name != describe["task"]:
-            raise CheckpointError(f"{path} was trained on {describe['task']}, not "
-                                  f"{type(env.unwrapped.task).name}")
+        check_task(path, describe, env)
         self._setup(model, describe)
 
     @classmethod

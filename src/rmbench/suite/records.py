@@ -16,7 +16,7 @@ from rmbench.eval.report import Rate
 
 KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",
         "failure_reasons", "train_wall_s", "train_wall_from_step", "eval_wall_s", "machines",
-        "memory")
+        "memory", "gym_id")
 
 
 def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:

@@ -266,7 +266,8 @@ def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | No
             "machines": {"train": train_timing.get("machines", []),
                          "eval": eval_timing.get("machines", [])},
             "memory": memory_of(spec, get_task(task).tmc, cfg), "checkpoint": str(ckpt),
-            "evaluation": str(evals)}
+            "evaluation": str(evals),
+            **({"gym_id": result["gym_id"]} if result.get("gym_id") else {})}  # (older summaries)
 
 
 def pooled_row(rows: dict[int, dict[str, Any] | None]) -> dict[str, Any] | None:
@@ -293,4 +294,5 @@ def pooled_row(rows: dict[int, dict[str, Any] | None]) -> dict[str, Any] | None:
             "machines": {stage: [m for r in seeds for m in r["machines"][stage]]
                          for stage in ("train", "eval")},
             "memory": seeds[0]["memory"],
+            **({"gym_id": seeds[0]["gym_id"]} if "gym_id" in seeds[0] else {}),
             "seeds": {str(s): rows[s] for s in sorted(rows)}}

@@ -17,7 +17,10 @@ from typing import Any, ClassVar
 import mujoco
 import numpy as np
 
-from rmbench.sim.station import TABLE_TOP
+from rmbench.sim import robot
+from rmbench.sim.station import HOME_ARM, TABLE_TOP
+
+HOME_TOL = 0.03  # m: a gripper this close to where it rests at home is back home
 
 
 @dataclass(frozen=True)
@@ -64,7 +67,8 @@ class Task:
     # Two episodes that differ only there are how the aliasing tests show a task needs memory.
     hidden_keys: ClassVar[tuple[str, ...]] = ()
     # Two moments that look alike but need different actions, each (hidden values, stage,
-    # n): the n-th expert segment start after the env reached that stage (rmbench.aliasing).
+    # n): the n-th expert segment start after the env reached that stage, or with n = 0 the
+    # first frame at that stage (rmbench.aliasing).
     aliasing_pair: ClassVar[tuple[tuple[dict, int, int], tuple[dict, int, int]]]
     # The state observation: names of ``environment_state()``'s entries, in order (see
     # rmbench.tasks.state for the shared encodings and docs/reference/observations.md).
@@ -104,6 +108,8 @@ class Task:
             piece.bind(model)
         self._fingers = {model.geom(f"{side}/10_{f}_gripper_finger").id
                          for side in ("left", "right") for f in ("left", "right")}
+        self._grasp_sites = [model.site(f"{side}/grasp").id for side in robot.SIDES]
+        self._home_sites = _home_sites(model, self._grasp_sites)
 
     def initialize(self, rng: np.random.Generator) -> None:
         """Sample the episode's layout and hidden variables; place everything. Called by
@@ -180,6 +186,13 @@ class Task:
                 return True
         return False
 
+    def hands_home(self) -> bool:
+        """Both grippers back (within ``HOME_TOL``) where they rest at home. A trial task counts
+        a try only then, as the benchmark's reference ends each try with the arm back at its
+        origin: the frame a next try is chosen at must not show which arm made the last."""
+        sites = self.data.site_xpos[self._grasp_sites]
+        return bool(np.linalg.norm(sites - self._home_sites, axis=1).max() <= HOME_TOL)
+
     def touched_by_fingers(self, body_id: int) -> bool:
         """Whether any gripper finger is in contact with ``body_id``."""
         fingers = self._fingers
@@ -190,3 +203,13 @@ class Task:
                     g2 in fingers and m.geom_bodyid[g1] == body_id):
                 return True
         return False
+
+
+def _home_sites(model: mujoco.MjModel, sites: list[int]) -> np.ndarray:
+    """The grasp sites' positions with both arms at home (forward kinematics only)."""
+    data = mujoco.MjData(model)
+    for side in robot.SIDES:
+        for joint, q in zip(robot.ARM_JOINTS, HOME_ARM[side], strict=True):
+            data.qpos[model.joint(f"{side}/{joint}").qposadr[0]] = q
+    mujoco.mj_kinematics(model, data)
+    return data.site_xpos[sites].copy()

@@ -12,14 +12,20 @@ left and right of the holder, y jitter U[-0.02, 0.02], lying along y with the po
 either way and yaw noise U[-0.25, 0.25]; the correct pair uniformly of [1,0], [1,1], [0,1]
 ([0,0] is never correct).
 
+Subtasks: each insertion and each flip ends with the cell set down and both arms back home
+(as the benchmark's reference ends each with the arm back at its origin). Step limit 1200:
+the benchmark's 1000 left the expert's longest episodes under 10% to spare once every try
+ends with the way home.
+
 Success: both batteries in their slots (within 1 cm, along the slot), in the correct
 orientations, lamp on, neither touched by a finger.
 Failure: a battery off the table.
 
 Memory: TMC M(n). Aliasing point: the slots' contact plates hide the cells' ends from the
 head camera, so after a failed try the holder looks like after any other failed try; only the
-past tells which pairs were already tried. Without it, flipping a cell at random after the first
-finds the pair within the step limit 75% of the time (``eval/chance.py``).
+past tells which pairs were already tried. With both arms home at every count, the view after
+the inserts is that view too. Without memory, flipping either cell at random finds the pair
+within the step limit 75% of the time (``eval/chance.py``).
 """
 
 from __future__ import annotations
@@ -60,9 +66,9 @@ def flips(correct: tuple[int, int]) -> list[int]:
 @register
 class BatteryTry(Task):
     name = "battery_try"
-    gym_id = "rmbench/BatteryTry-v1"
+    gym_id = "rmbench/BatteryTry-v2"
     tmc = "M(n)"
-    step_limit = 1000
+    step_limit = 1200
     subtasks = ("insert the left battery", "insert the right battery",
                 "flip the left battery", "flip the right battery")
     instructions_seen = (
@@ -80,7 +86,8 @@ class BatteryTry(Task):
     aliasing_point = "after a failed try: the holder hides the cells' ends and the lamp is off"
     aliasing_stage = 3
     hidden_keys = ("correct",)
-    aliasing_pair = (({"correct": (1, 1)}, 3, 2), ({"correct": (0, 1)}, 4, 2))
+    # at the frame each try is counted, where the planner chooses the next flip
+    aliasing_pair = (({"correct": (1, 1)}, 3, 0), ({"correct": (0, 1)}, 4, 0))
 
     # The state observation: the holder, the lamp, and the two identical cells left to right.
     # A cell's axis shows as cos/sin(2 yaw) (no polarity); which way its positive end points
@@ -157,8 +164,11 @@ class BatteryTry(Task):
         self.lamp.set(self.model, "green" if lit else "off")
         plan = self.plan()
         # Inserts end with the cell in its slot positive-away; each flip ends when the pair
-        # shows the next try of the sequence.
-        while self.cursor < len(plan):
+        # shows the next try of the sequence. Either counts only once both arms are home
+        # again: with the arm still at the holder, the frame the next step is chosen at would
+        # show which cell it just set down, and so which try comes next, without memory.
+        home = self.hands_home()
+        while home and self.cursor < len(plan):
             if self.cursor < 2:
                 done = config[self.cursor] == 0
             else:
@@ -173,6 +183,6 @@ class BatteryTry(Task):
         stage, progress = self.advance(self.cursor, self.cursor / len(plan), solved=success)
         preds = {"left_orientation": -1 if config[0] is None else config[0],
                  "right_orientation": -1 if config[1] is None else config[1],
-                 "lamp": self.lamp.state, "correct": list(self.correct)}
+                 "lamp": self.lamp.state, "correct": list(self.correct), "hands_home": home}
         return Evaluation(success=success, failure=bool(reason), progress=progress,
                           stage=stage, failure_reason=reason, predicates=preds)

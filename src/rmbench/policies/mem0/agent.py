@@ -21,7 +21,7 @@ import torch
 
 from rmbench.policies.action_space import EEActions
 from rmbench.policies.base import BasePolicy
-from rmbench.policies.checkpoint import CheckpointError, load_weights, read_config
+from rmbench.policies.checkpoint import CheckpointError, check_task, load_weights, read_config
 from rmbench.policies.config import parse_argument
 from rmbench.policies.ensemble import TemporalEnsemble
 from rmbench.policies.mem0.classifier import Debounce
@@ -63,9 +63,7 @@ class Mem0Policy(BasePolicy):
         path, overrides, options = parse_argument(arg, Mem0Config, extra=("ablation",))
         ablations = tuple(a for a in options.get("ablation", "").split(",") if a)
         model, cfg, describe = load_mem0(path, ablations, overrides)
-        if env is not None and type(env.unwrapped.task).name != describe["task"]:
-            raise CheckpointError(f"{path} was trained on {describe['task']}, not "
-                                  f"{type(env.unwrapped.task).name}")
+        check_task(path, describe, env)
         self._setup(model, cfg, describe, env)
 
     @classmethod

@@ -97,6 +97,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     vectors = sentence_embeddings(executor_texts + planner_texts)
     describe = {
         "policy": "mem0", "config": cfg.to_dict(), "task": task.name, "tmc": task.tmc,
+        "gym_id": ds.gym_id,
         "executor_texts": executor_texts, "planner_texts": planner_texts,
         "text_encoder": "learned" if vectors is None else "minilm",
         "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
