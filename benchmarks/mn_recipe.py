@@ -22,26 +22,11 @@ import argparse
 import json
 from pathlib import Path
 
-from rmbench.suite.records import cell_record
-from rmbench.suite.stages import failure_reasons
+from rmbench.suite.records import cell_record, evaluation_rows
 from rmbench.suite.tables import differences
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "mn_recipe.json"
-
-
-def evaluation_table(folder: Path, spec: str) -> dict:
-    """An `rmbench eval` folder of one mem0 checkpoint as a table with one column, ``spec``."""
-    run, summary = (json.loads((folder / f).read_text()) for f in ("run.json", "summary.json"))
-    policy = run["policy"]
-    if not policy.startswith("mem0:"):
-        raise SystemExit(f"{folder}: evaluates {policy!r}, not a mem0 checkpoint")
-    cells = {task: {spec: {**row, "evaluation": str(folder), "checkpoint": policy[5:],
-                             "failure_reasons": failure_reasons(folder / task / "episodes.jsonl")}}
-             for task, row in summary["tasks"].items()}
-    tasks = " ".join(f"--task {t}" for t in cells)
-    return {"command": f"rmbench eval {tasks} --policy {policy} --episodes {run['episodes']} "
-                       f"--seed {run['seed']} --out {folder}", "plan": None, "cells": cells}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.evaluation and "," in args.specs:
         raise SystemExit("--evaluation records one column: give one --specs")
     res = (json.loads((Path(args.table) / "table.json").read_text()) if args.table
-           else evaluation_table(Path(args.evaluation), args.specs))
+           else evaluation_rows(Path(args.evaluation), args.specs))
     cells = {}
     for task in args.tasks.split(","):
         for spec in args.specs.split(","):

@@ -4,10 +4,15 @@ table that every number the docs quote about the table comes from.
     python benchmarks/table_state.py --table runs/table_state \\
         --tasks press_button,cover_blocks --specs mem0,mem0:no_key,mem0:gt_classifier \\
         --dataset rmbench/2 --why "trained on format 1 datasets"
+    python benchmarks/table_state.py --evaluation EVAL --tasks press_button --specs mem0 \\
+        --dataset rmbench/2 --why "..."
 
-Each recorded cell replaces its task's and column's cell. A replaced cell trained on another
-dataset format moves to ``superseded`` under ``--why``, so no measurement is dropped; one of
-the same format is the same recipe measured before, or one of the seeds the new cell pools.
+``--evaluation`` records an ``rmbench eval`` folder of one checkpoint as one column (a
+checkpoint made outside the table, such as a planner refit, which records where it came
+from). Each recorded cell replaces its task's and column's cell. A replaced cell trained on
+another dataset format or run on another task version moves to ``superseded`` under
+``--why``, so no measurement is dropped; otherwise it was the same recipe measured before, or
+one of the seeds the new cell pools.
 A recorded cell keeps the command that made it and the dataset format it trained on. The
 file is written atomically.
 """
@@ -16,9 +21,11 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import asdict
 from pathlib import Path
 
-from rmbench.suite.records import cell_record
+from rmbench.eval.chance import chance
+from rmbench.suite.records import cell_record, evaluation_rows
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "table_state.json"
@@ -34,13 +41,14 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
             if row is None:
                 raise SystemExit(f"{table}: {task} {spec} is not evaluated yet")
             old = doc["cells"].setdefault(task, {}).get(spec)
-            # a cell of the same data is the same recipe measured before (or one of the
-            # seeds the new cell pools): the new one stands for it
-            if old is not None and old.get("dataset") != dataset:
+            new = {**cell_record(row, task), "dataset": dataset, "command": run["command"]}
+            # a cell of the same data and task version is the same recipe measured before
+            # (or one of the seeds the new cell pools): the new one stands for it
+            if old is not None and (old.get("dataset"), old.get("gym_id")) != (
+                    dataset, new.get("gym_id")):
                 replaced.setdefault(task, {})[spec] = old
-            doc["cells"][task][spec] = {**cell_record(row, task), "dataset": dataset,
-                                        "command": run["command"]}
-        doc["chance"][task] = run["chance"][task]
+            doc["cells"][task][spec] = new
+        doc["chance"][task] = run["chance"][task] if "chance" in run else asdict(chance(task))
     if replaced:
         groups = [g for g in doc.get("superseded", []) if g["why"] != why]
         same = next((g for g in doc.get("superseded", []) if g["why"] == why), None)
@@ -53,16 +61,21 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--table", required=True, help="an `rmbench table` folder (its table.json)")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--table", help="an `rmbench table` folder (its table.json)")
+    source.add_argument("--evaluation", help="an `rmbench eval` folder of one checkpoint")
     p.add_argument("--tasks", required=True)
     p.add_argument("--specs", required=True)
     p.add_argument("--dataset", required=True, help="the format the cells trained on (rmbench/N)")
     p.add_argument("--why", required=True, help="why the replaced cells no longer stand, in words")
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
-    run = json.loads((Path(args.table) / "table.json").read_text())
+    if args.evaluation and "," in args.specs:
+        raise SystemExit("--evaluation records one column: give one --specs")
+    run = (json.loads((Path(args.table) / "table.json").read_text()) if args.table
+           else evaluation_rows(Path(args.evaluation), args.specs))
     doc = record(json.loads(args.out.read_text()), run, args.tasks.split(","),
-                 args.specs.split(","), args.dataset, args.why, args.table)
+                 args.specs.split(","), args.dataset, args.why, args.table or args.evaluation)
     write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
     print(f"wrote {args.out}")
     return 0

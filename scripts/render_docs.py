@@ -275,6 +275,8 @@ def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
             endings = ", ".join(f"{k} {v}" for k, v in c["endings"].items() if v)
             train = rec.get("train_wall") or ("(Mem-0's checkpoint)" if spec == "mem0:gt_classifier"
                                               else minutes(c["train_wall_s"]))
+            if "planner_refit" in c and spec != "mem0:gt_classifier":
+                train += " (the executor), then its planner refit (`benchmarks/planner_refit.py`)"
             failures = rec.get("failures") or "; ".join(
                 f"{why} {n}" for why, n in list(c["failure_reasons"].items())[:4])
             rows.append([task.name, f"`{spec}`", f"{c['successes']}/{c['episodes']}", progress, endings,

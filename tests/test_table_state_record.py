@@ -48,3 +48,45 @@ def test_a_cell_of_the_same_data_is_replaced_without_a_copy(table_state):
 def test_a_cell_not_evaluated_is_a_one_line_error(table_state):
     with pytest.raises(SystemExit, match="press_button mem0:no_key is not evaluated yet"):
         table_state.record(_doc(), _run(), ["press_button"], ["mem0:no_key"], "rmbench/2", "x", "t")
+
+
+def test_a_cell_of_another_task_version_moves_to_superseded(table_state):
+    doc = {"cells": {"battery_try": {"mem0": {"successes": 94, "dataset": "rmbench/2",
+                                              "gym_id": "rmbench/BatteryTry-v1"}}},
+           "chance": {}, "superseded": []}
+    run = {"command": "rmbench table ...", "chance": {"battery_try": {"rate": 0.75}},
+           "cells": {"battery_try": {"mem0": {"successes": 80, "gym_id": "rmbench/BatteryTry-v2"}}}}
+    doc = table_state.record(doc, run, ["battery_try"], ["mem0"], "rmbench/2", "v1", "t")
+    assert doc["cells"]["battery_try"]["mem0"]["successes"] == 80
+    assert doc["superseded"][0]["cells"]["battery_try"]["mem0"]["successes"] == 94
+
+
+def test_an_evaluation_folder_gives_one_column_with_its_checkpoints_history(tmp_path):
+    """A planner refit's cell names the checkpoint it came from and takes that training's
+    wall; the evaluation's wall adds up its episodes'."""
+    import json
+
+    from rmbench.suite.records import evaluation_rows
+
+    trained, refit, evals = tmp_path / "trained", tmp_path / "refit", tmp_path / "eval"
+    trained.mkdir()
+    (trained / "timing.json").write_text(json.dumps({"train_wall_s": 2000.0, "machines": ["m"]}))
+    refit.mkdir()
+    (refit / "config.json").write_text(json.dumps(
+        {"planner_refit": {"from": str(trained), "set": {"planner_key_delay": 12}}}))
+    (evals / "press_button").mkdir(parents=True)
+    (evals / "run.json").write_text(json.dumps(
+        {"policy": f"mem0:{refit}?ablation=gt_classifier", "seed": 0, "episodes": 2}))
+    (evals / "summary.json").write_text(json.dumps({"tasks": {"press_button": {
+        "successes": 1, "episodes": 2, "success_rate": 0.5, "gym_id": "rmbench/PressButton-v2"}}}))
+    episodes = [{"seed": 1, "success": True, "reason": "success", "message": "", "wall_s": 3.0},
+                {"seed": 2, "success": False, "reason": "timeout", "message": "", "wall_s": 4.5}]
+    (evals / "press_button" / "episodes.jsonl").write_text(
+        "".join(json.dumps(e) + "\n" for e in episodes))
+    res = evaluation_rows(evals, "mem0:gt_classifier")
+    row = res["cells"]["press_button"]["mem0:gt_classifier"]
+    assert row["train_wall_s"] == 2000.0 and row["eval_wall_s"] == 7.5
+    assert row["planner_refit"] == {"from": str(trained), "set": {"planner_key_delay": 12}}
+    assert row["failure_reasons"] == {"timeout": 1} and row["gym_id"] == "rmbench/PressButton-v2"
+    assert row["checkpoint"] == str(refit)
+    assert res["command"].startswith("rmbench eval --task press_button --policy mem0:")

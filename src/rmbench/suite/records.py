@@ -1,7 +1,8 @@
 """A cell as the committed results keep it (``benchmarks/results/*.json``): the row of
 ``table.json`` without its local folders, plus what the evaluation's records and the
 checkpoint say about the policy's subtask ends (``rmbench boundaries``) and its planner.
-A cell pooled over training seeds keeps each seed's record under ``seeds``."""
+A cell pooled over training seeds keeps each seed's record under ``seeds``. An ``rmbench
+eval`` folder of one checkpoint gives such rows too (``evaluation_rows``)."""
 
 from __future__ import annotations
 
@@ -13,10 +14,12 @@ from rmbench.eval.boundaries import summarize
 from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
 from rmbench.eval.report import Rate
+from rmbench.machine import describe
+from rmbench.suite.stages import TIMING, failure_reasons
 
 KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",
         "failure_reasons", "train_wall_s", "train_wall_from_step", "eval_wall_s", "machines",
-        "memory", "gym_id")
+        "memory", "gym_id", "planner_refit")
 
 
 def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
@@ -32,4 +35,38 @@ def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
     out["boundaries"] = summarize(read_records(Path(row["evaluation"]) / task / "episodes.jsonl"))
     planner = Path(row["checkpoint"]) / "training" / "planner.json"  # M(n) checkpoints only
     out["planner"] = json.loads(planner.read_text()) if planner.exists() else None
+    config = Path(row["checkpoint"]) / "config.json"
+    if out["planner"] is None and config.exists():  # a planner refit keeps its report there
+        out["planner"] = json.loads(config.read_text()).get("planner_refit", {}).get("report")
     return out
+
+
+def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
+    """An ``rmbench eval`` folder of one checkpoint as a table of one column, ``spec``: its
+    command and, per task, a row as ``cell_row`` gives one. Its training wall is the
+    checkpoint's; for a planner refit (``benchmarks/planner_refit.py``) the executor's
+    training's, with where the refit came from. Its evaluation wall adds up the episodes'
+    (the folder's run keeps no clock of its own) on this machine."""
+    run, summary = (json.loads((folder / f).read_text()) for f in ("run.json", "summary.json"))
+    name, _, arg = run["policy"].partition(":")
+    ckpt = Path(arg.split("?")[0])
+    config = json.loads((ckpt / "config.json").read_text())
+    refit = config.get("planner_refit")
+    trained = Path(refit["from"]) if refit else ckpt
+    timing = json.loads((trained / TIMING).read_text()) if (trained / TIMING).exists() else {}
+    cells = {}
+    for task, result in summary["tasks"].items():
+        records = read_records(folder / task / "episodes.jsonl")
+        cells[task] = {spec: {
+            **result, "failure_reasons": failure_reasons(folder / task / "episodes.jsonl"),
+            "train_wall_s": timing.get("train_wall_s"),
+            "train_wall_from_step": timing.get("train_wall_from_step", 0),
+            "eval_wall_s": round(sum(r.get("wall_s", 0.0) for r in records), 1),
+            "machines": {"train": timing.get("machines", []), "eval": [describe()]},
+            "checkpoint": str(ckpt), "evaluation": str(folder),
+            **({"planner_refit": {"from": str(refit["from"]), "set": refit["set"]}}
+               if refit else {})}}
+    tasks = " ".join(f"--task {t}" for t in cells)
+    return {"command": f"rmbench eval {tasks} --policy {run['policy']} --episodes "
+                       f"{run['episodes']} --seed {run['seed']} --out {folder}",
+            "plan": None, "cells": cells}
