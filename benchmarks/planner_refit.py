@@ -3,7 +3,8 @@ executor: a planner change measured in closed loop without training the executor
 
 The planner trains before the executor, from the initialisation the training's seed draws,
 on its own random generators, and is frozen after: a full training with the same seed and
-the new settings has this executor and, up to float rounding, this planner.
+the new settings has this executor and this planner, tensor for tensor (checked by
+``benchmarks/planner_refit_check.py``: results/planner_refit_check.json).
 
     python benchmarks/planner_refit.py CKPT DATASET OUT --set planner_key_delay=12
     rmbench eval --task press_button --policy mem0:OUT --episodes 100 --out EVAL
