@@ -13,7 +13,8 @@ A candidate that changes only what a checkpoint's policy does can instead be mea
 ``rmbench eval`` on that checkpoint (``--evaluation DIR``: its folder, recorded as the one
 column ``--specs`` names, beside the candidate's other columns).
 
-A candidate recorded again replaces its earlier entry; the file is written atomically.
+A candidate recorded again keeps its other tasks and columns and takes the new cells in place
+of the ones they replace; the file is written atomically.
 """
 
 from __future__ import annotations
@@ -53,12 +54,12 @@ def main(argv: list[str] | None = None) -> int:
             cells.setdefault(task, {})[spec] = cell_record(row, task)
     doc = json.loads(args.out.read_text()) if args.out.exists() else {"candidates": []}
     command = res.get("command", "")
-    if args.evaluation:  # one column at a time: the candidate's other columns stay
-        old = next((c for c in doc["candidates"] if c["name"] == args.name), None)
-        if old is not None:
-            for task, row in old["cells"].items():
-                cells[task] = {**row, **cells.get(task, {})}
-            command = "; ".join(dict.fromkeys(old["command"].split("; ") + [command]))
+    # the candidate's other tasks and columns stay: a re-run replaces only what it recorded
+    old = next((c for c in doc["candidates"] if c["name"] == args.name), None)
+    if old is not None:
+        for task, row in old["cells"].items():
+            cells[task] = {**row, **cells.get(task, {})}
+        command = "; ".join(dict.fromkeys(old["command"].split("; ") + [command]))
     entry = {"name": args.name, "changes": args.changes, "command": command,
              "plan": res.get("plan"), "cells": cells,
              # Mem-0 minus each other column, with Newcombe's 95% interval
