@@ -33,9 +33,9 @@ The arms' joints, which every policy reads, agree at the pair as well (largest d
 the twelve arm joints at most 0.037 rad, battery_try's). battery_try's pair is the frame each
 try is counted at, where a planner chooses the next flip: the task counts a try only with both
 arms back home (battery_try-v2). Counted as the cell went in (v1), the arm that had set it down
-was still over its slot there, and the frame showed which flip came next. The grippers differ by 0.40 on swap_blocks, whose pair is
-the episode's first step against its end (the opening at reset against the expert's after a
-release); that is not bounded here.
+was still over its slot there, and the frame showed which flip came next. The grippers differ
+by 0.40 on swap_blocks, whose pair is the episode's first step against its end (the opening at
+reset against the expert's after a release); that is not bounded here.
 """
 
 from rmbench.aliasing import measure
