@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
             cells[task] = {**row, **cells.get(task, {})}
         command = "; ".join(dict.fromkeys(old["command"].split("; ") + [command]))
     entry = {"name": args.name, "changes": args.changes, "command": command,
-             "plan": res.get("plan"), "cells": cells,
+             "plan": res.get("plan") or (old or {}).get("plan"), "cells": cells,
              # Mem-0 minus each other column, with Newcombe's 95% interval
              "differences": differences(cells)}
     doc["candidates"] = [c for c in doc["candidates"] if c["name"] != args.name] + [entry]

@@ -20,7 +20,7 @@ from pathlib import Path
 import torch
 from safetensors.torch import load_file
 
-from rmbench.training.loop import CURVE_CSV
+from rmbench.training.loop import CURVE_CSV, STATE
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "planner_refit_check.json"
@@ -33,7 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("refit", type=Path)
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
-    state = torch.load(args.full / "training" / "state.pt", weights_only=True, map_location="cpu")
+    state = torch.load(args.full / STATE, weights_only=True, map_location="cpu")
     model, refit = state["model"], load_file(args.refit / "model.safetensors")
     names = [k for k in refit if k.startswith("planner.")]
     same = sum(torch.equal(model[f"model.{k}"], refit[k]) for k in names)
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
                  "original": str(args.original), "refit": str(args.refit)}
     write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
     print(json.dumps(doc[args.refit.name]))
-    return 0 if same == len(names) and identical else 1
+    return 0 if names and rows > 0 and same == len(names) and identical else 1
 
 
 if __name__ == "__main__":

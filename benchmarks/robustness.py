@@ -24,7 +24,7 @@ from pathlib import Path
 
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.robustness import sweep
-from rmbench.tasks.registry import get_task, ordered
+from rmbench.tasks.registry import get_task, ordered, recorded_gym_id
 from rmbench.video import write_atomic
 
 ROOT = Path(__file__).resolve().parent
@@ -76,10 +76,10 @@ def main() -> None:
         for kind, sigma in todo:
             for task in args.tasks:
                 old = cell_path(task, kind, sigma)
-                if old.exists():  # cells written before versions were kept count as current
+                if old.exists():
                     saved = json.loads(old.read_text())
                     if (saved["episodes"] >= args.episodes
-                            and saved.get("gym_id", get_task(task).gym_id) == get_task(task).gym_id):
+                            and recorded_gym_id(task, saved) == get_task(task).gym_id):
                         continue
                 c = run_cell(task, kind, sigma, args.episodes, args.seed, args.workers, args.tau)
                 print(f"{task:<20} {kind:<6} {sigma:<5g} {c['successes']:>3}/{c['episodes']}"

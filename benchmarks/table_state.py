@@ -26,6 +26,7 @@ from pathlib import Path
 
 from rmbench.eval.chance import chance
 from rmbench.suite.records import cell_record, evaluation_rows
+from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "table_state.json"
@@ -44,8 +45,8 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
             new = {**cell_record(row, task), "dataset": dataset, "command": run["command"]}
             # a cell of the same data and task version is the same recipe measured before
             # (or one of the seeds the new cell pools): the new one stands for it
-            if old is not None and (old.get("dataset"), old.get("gym_id")) != (
-                    dataset, new.get("gym_id")):
+            if old is not None and (old.get("dataset"), recorded_gym_id(task, old)) != (
+                    dataset, recorded_gym_id(task, new)):
                 replaced.setdefault(task, {})[spec] = old
             doc["cells"][task][spec] = new
         doc["chance"][task] = run["chance"][task] if "chance" in run else asdict(chance(task))

@@ -31,7 +31,7 @@ from rmbench.eval.report import PUBLISHED, Rate
 from rmbench.suite.plan import applies
 from rmbench.suite.tables import PUBLISHED_ABLATIONS, difference_table, differences
 from rmbench.tasks import get_task
-from rmbench.tasks.registry import ordered
+from rmbench.tasks.registry import ordered, recorded_gym_id
 from rmbench.video import write_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -110,7 +110,7 @@ def _older(task: str, spec: str, cell: dict | None) -> str:
     marks = ""
     if cls.tmc == "M(n)" and spec.startswith("mem0") and cell.get("dataset") != FORMAT:
         marks += "†"
-    if cell.get("gym_id", cls.gym_id) != cls.gym_id:
+    if recorded_gym_id(task, cell) != cls.gym_id:
         marks += "‡"
     return f" {marks}" if marks else ""
 

@@ -290,6 +290,19 @@ def test_bad_arguments_give_one_line_errors(ckpt, tmp_path):
         env.close()
 
 
+def test_a_run_saved_before_checkpoints_recorded_their_task_version_resumes(
+        dataset, tmp_path, interrupt_training):
+    name = "dp"
+    interrupt_training(lambda: train_tiny(name, dataset, tmp_path / "b", steps=6))
+    path = tmp_path / "b" / "training" / "state.pt"
+    state = torch.load(path, weights_only=True)
+    identity = json.loads(state["identity"])
+    del identity["describe"]["gym_id"]  # as runs saved before the field were
+    state["identity"] = json.dumps(identity)
+    torch.save(state, path)
+    assert train_tiny(name, dataset, tmp_path / "b", steps=6)["resumed_from"] == 3
+
+
 def test_baseline_through_the_evaluation_harness(ckpt, tmp_path):
     from rmbench.eval import EvalConfig, evaluate
     from rmbench.eval.harness import read_records

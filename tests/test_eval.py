@@ -149,6 +149,19 @@ def test_a_task_folder_of_another_task_version_is_not_resumed(tmp_path):
     assert len(records(tmp_path)) == 1
 
 
+def test_episodes_recorded_before_versions_were_kept_count_as_that_version(tmp_path):
+    from rmbench.eval.harness import _check_version
+    from rmbench.tasks.registry import recorded_gym_id
+
+    assert recorded_gym_id("battery_try", {}) == "rmbench/BatteryTry-v1"
+    (tmp_path / "episodes.jsonl").write_text('{"seed": 1}\n')
+    with pytest.raises(EvalError, match="holds episodes of rmbench/BatteryTry-v1, this"):
+        _check_version(tmp_path, "battery_try")
+    assert not (tmp_path / "version.json").exists()
+    _check_version(tmp_path, TASK)  # a task whose version then is the current one
+    assert (tmp_path / "version.json").exists()
+
+
 def test_replay_of_a_dataset_succeeds_on_its_own_seeds(dataset, tmp_path):
     summary = evaluate(cfg(tmp_path, policy=f"replay:{dataset}"))
     assert summary["tasks"][TASK]["successes"] == 3

@@ -15,7 +15,7 @@ Trial-and-error tasks allow as many tries as the step limit leaves after the exp
 durations: measured on 10 demonstrations per task (``rmbench collect TASK --episodes 10
 --seed 0``, subtask segments), battery_try's two inserts take 367 steps, a flip that fails
 200 (left) or 203 (right) with the arm's way back home, and one that lights the lamp 147 or
-151 (it ends as the cell goes in; three flips fit in 1000), a swap and its press in
+151 (it ends as the cell goes in; four flips fit in 1200), a swap and its press in
 blocks_ranking_try 451-511 (7 fit in 3500), a move in swap_blocks 149-191 before a press of
 85 (5 moves fit in 1000).
 """

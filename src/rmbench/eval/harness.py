@@ -36,6 +36,7 @@ from rmbench.identity import differences
 from rmbench.parallel import BACKENDS, in_order, make_executor
 from rmbench.policies.registry import parse_spec
 from rmbench.tasks import get_task
+from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
@@ -172,18 +173,22 @@ def evaluate(cfg: EvalConfig) -> dict[str, Any]:
 
 def _check_version(folder: Path, task: str) -> None:
     """A task folder holds episodes of one task version: a folder written on another (its
-    ``version.json``) is refused, never resumed. Folders written before versions were kept
-    have none and resume as before."""
+    ``version.json``, or for episodes recorded before versions were kept, the version of that
+    time) is refused, never resumed."""
     path, gym_id = folder / "version.json", get_task(task).gym_id
     if path.exists():
         try:
             saved = json.loads(path.read_text()).get("gym_id")
         except (OSError, json.JSONDecodeError, AttributeError) as err:
             raise EvalError(f"{path} is unreadable ({err}); use another --out") from None
-        if saved != gym_id:
-            raise EvalError(f"{folder} holds episodes of {saved}, this rmbench's {task} is "
-                            f"{gym_id} (CHANGELOG.md); use another --out")
+    elif read_records(folder / "episodes.jsonl"):
+        saved = recorded_gym_id(task, {})
     else:
+        saved = gym_id
+    if saved != gym_id:
+        raise EvalError(f"{folder} holds episodes of {saved}, this rmbench's {task} is "
+                        f"{gym_id} (CHANGELOG.md); use another --out")
+    if not path.exists():
         write_atomic(path, (json.dumps({"gym_id": gym_id}) + "\n").encode())
 
 

@@ -18,6 +18,7 @@ from safetensors import SafetensorError
 from safetensors.torch import load as load_bytes
 from safetensors.torch import save as save_bytes
 
+from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
 
 FORMAT = 1
@@ -55,14 +56,15 @@ def read_config(folder: str | Path, policy: str | None = None) -> dict[str, Any]
 def check_task(folder: str | Path, describe: dict[str, Any], env) -> None:
     """A checkpoint runs only on the task it was trained on, and only on that task's version
     (its gym id): a version changes what the demonstrations showed (CHANGELOG.md).
-    Checkpoints saved before versions were recorded name the task alone."""
+    Checkpoints saved before versions were recorded name the task alone: theirs is the
+    version of that time (``recorded_gym_id``)."""
     if env is None:
         return
     task = env.unwrapped.task
     if type(task).name != describe["task"]:
         raise CheckpointError(f"{folder} was trained on {describe['task']}, not {type(task).name}")
-    trained = describe.get("gym_id")
-    if trained is not None and trained != task.gym_id:
+    trained = recorded_gym_id(describe["task"], describe)
+    if trained != task.gym_id:
         raise CheckpointError(f"{folder} was trained on {trained} demonstrations, this rmbench's "
                               f"{type(task).name} is {task.gym_id} (CHANGELOG.md): train it again")
 

@@ -37,7 +37,7 @@ def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
     out["planner"] = json.loads(planner.read_text()) if planner.exists() else None
     config = Path(row["checkpoint"]) / "config.json"
     if out["planner"] is None and config.exists():  # a planner refit keeps its report there
-        out["planner"] = json.loads(config.read_text()).get("planner_refit", {}).get("report")
+        out["planner"] = (json.loads(config.read_text()).get("planner_refit") or {}).get("report")
     return out
 
 
@@ -45,11 +45,15 @@ def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
     """An ``rmbench eval`` folder of one checkpoint as a table of one column, ``spec``: its
     command and, per task, a row as ``cell_row`` gives one. Its training wall is the
     checkpoint's; for a planner refit (``benchmarks/planner_refit.py``) the executor's
-    training's, with where the refit came from. Its evaluation wall adds up the episodes'
-    (the folder's run keeps no clock of its own) on this machine."""
+    training's, with where the refit came from. Its evaluation wall adds up the episodes' (the
+    folder keeps no clock of its own: a one-worker run's wall), its machine is the one this
+    runs on (record where the evaluation ran). Paths are read as the evaluation wrote them,
+    so this runs where it ran."""
     run, summary = (json.loads((folder / f).read_text()) for f in ("run.json", "summary.json"))
-    name, _, arg = run["policy"].partition(":")
+    _, _, arg = run["policy"].partition(":")
     ckpt = Path(arg.split("?")[0])
+    if not (ckpt / "config.json").is_file():
+        raise ValueError(f"{folder}: evaluates {run['policy']!r}, not a checkpoint found here")
     config = json.loads((ckpt / "config.json").read_text())
     refit = config.get("planner_refit")
     trained = Path(refit["from"]) if refit else ckpt

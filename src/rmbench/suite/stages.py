@@ -281,6 +281,9 @@ def pooled_row(rows: dict[int, dict[str, Any] | None]) -> dict[str, Any] | None:
     if len(rows) == 1:
         return next(iter(rows.values()))
     seeds = [rows[s] for s in sorted(rows)]
+    if len({r.get("gym_id") for r in seeds}) > 1:
+        raise ValueError(f"the seeds of one cell ran on different task versions: "
+                         f"{sorted({str(r.get('gym_id')) for r in seeds})}")
     n, k = sum(r["episodes"] for r in seeds), sum(r["successes"] for r in seeds)
     walls = {w: sum(r[w] or 0 for r in seeds) for w in ("train_wall_s", "eval_wall_s")}
     return {"success_rate": round(k / n, 4), "successes": k,

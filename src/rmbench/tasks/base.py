@@ -187,9 +187,9 @@ class Task:
         return False
 
     def hands_home(self) -> bool:
-        """Both grippers back (within ``HOME_TOL``) where they rest at home. A trial task counts
+        """Both grippers back (within ``HOME_TOL``) where they rest at home. battery_try counts
         a try only then, as the benchmark's reference ends each try with the arm back at its
-        origin: the frame a next try is chosen at must not show which arm made the last."""
+        origin: the frame the next try is chosen at must not show which arm made the last."""
         sites = self.data.site_xpos[self._grasp_sites]
         return bool(np.linalg.norm(sites - self._home_sites, axis=1).max() <= HOME_TOL)
 

@@ -31,6 +31,18 @@ def ordered() -> list[type[Task]]:
     return sorted(TASKS.values(), key=lambda c: (c.tmc != "M(1)", c.name))
 
 
+# Records made before datasets, checkpoints and evaluations kept their task's gym id: the
+# version they were made on, where that is not the current one (CHANGELOG.md, 2026-11-28).
+UNRECORDED_VERSIONS = {"battery_try": "rmbench/BatteryTry-v1"}
+
+
+def recorded_gym_id(task: str, record: dict) -> str:
+    """The task version a record (a dataset's metadata, a checkpoint's config, a cell) was made
+    on: its ``gym_id``, or for one made before versions were kept, the version then."""
+    cls = get_task(task)
+    return record.get("gym_id") or UNRECORDED_VERSIONS.get(cls.name, cls.gym_id)
+
+
 def get_task(name: str) -> type[Task]:
     """A task class by name (``put_back_block``) or gym id (``rmbench/PutBackBlock-v1``)."""
     if name in TASKS:

@@ -43,6 +43,7 @@ from tqdm import tqdm
 
 from rmbench.identity import differences
 from rmbench.machine import describe as describe_machine
+from rmbench.tasks.registry import recorded_gym_id
 from rmbench.training.device import check_device
 from rmbench.video import write_atomic
 
@@ -280,6 +281,10 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
     saved = json.loads(state["identity"])
     if isinstance(saved.get("describe", {}).get("config"), dict):
         saved["describe"]["config"] = {**config_defaults, **saved["describe"]["config"]}
+        if "gym_id" in identity.get("describe", {}) and "task" in saved["describe"]:
+            # a run saved before checkpoints recorded their task version resumes on its own
+            saved["describe"]["gym_id"] = recorded_gym_id(saved["describe"]["task"],
+                                                           saved["describe"])
     what = differences(_placeless(saved), _placeless(identity))
     if what:
         raise TrainingError(f"{out} holds a training run with other arguments ({what}); "
