@@ -211,10 +211,10 @@ def state_differences() -> str:
         cells[t] = {s: c for s, c in row.items() if _older(t, s, c) == base}
         for c_mark in (_older(t, s, c) for s, c in row.items()):
             left_out |= set(c_mark.strip()) ^ set(base.strip())  # what kept a pair apart
-    lines = difference_table({"cells": cells, "differences": differences(cells)}, specs)
-    for t, row in res["cells"].items():  # a row measured on an earlier task version says so
-        if "‡" in _older(t, "mem0", row["mem0"]):
-            lines = [line.replace(f"| {t} |", f"| {t} ‡ |", 1) for line in lines]
+    # a row measured on an earlier task version says so
+    labels = {t: f"{t} ‡" for t, row in res["cells"].items() if "‡" in _older(t, "mem0", row["mem0"])}
+    lines = difference_table({"cells": cells, "differences": differences(cells)}, specs,
+                             labels=labels)
     text = "\n".join(lines) + "\n"
     return (text + _footnote(text, "— where one of the two cells is", "".join(sorted(left_out)))
             + _footnote(text, marks="‡" if "‡" in text else ""))

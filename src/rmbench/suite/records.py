@@ -15,7 +15,7 @@ from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
 from rmbench.eval.report import Rate
 from rmbench.machine import describe
-from rmbench.suite.stages import TIMING, failure_reasons
+from rmbench.suite.stages import TIMING, result_row
 
 KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",
         "failure_reasons", "train_wall_s", "train_wall_from_step", "eval_wall_s", "machines",
@@ -61,13 +61,10 @@ def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
     cells = {}
     for task, result in summary["tasks"].items():
         records = read_records(folder / task / "episodes.jsonl")
+        clock = {"eval_wall_s": round(sum(r.get("wall_s", 0.0) for r in records), 1),
+                 "machines": [describe()]}
         cells[task] = {spec: {
-            **result, "failure_reasons": failure_reasons(folder / task / "episodes.jsonl"),
-            "train_wall_s": timing.get("train_wall_s"),
-            "train_wall_from_step": timing.get("train_wall_from_step", 0),
-            "eval_wall_s": round(sum(r.get("wall_s", 0.0) for r in records), 1),
-            "machines": {"train": timing.get("machines", []), "eval": [describe()]},
-            "checkpoint": str(ckpt), "evaluation": str(folder),
+            **result_row(result, task, ckpt, folder, timing, clock),
             **({"planner_refit": {"from": str(refit["from"]), "set": refit["set"]}}
                if refit else {})}}
     tasks = " ".join(f"--task {t}" for t in cells)

@@ -251,8 +251,16 @@ def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | No
     if result is None:
         return None
     ckpt, evals = plan.train_dir(out, task, spec), plan.eval_dir(out, task, spec)
-    train_timing, eval_timing = read_json(ckpt / TIMING, {}), read_json(evals / TIMING, {})
     cfg = config_for(trained_spec(spec), plan.obs, plan.sets)
+    return {**result_row(result, task, ckpt, evals, read_json(ckpt / TIMING, {}),
+                         read_json(evals / TIMING, {})),
+            "memory": memory_of(spec, get_task(task).tmc, cfg)}
+
+
+def result_row(result: dict[str, Any], task: str, ckpt: Path, evals: Path,
+               train_timing: dict[str, Any], eval_timing: dict[str, Any]) -> dict[str, Any]:
+    """A cell's row from its task's evaluation summary (``result``), its checkpoint and
+    evaluation folders and their clocks (``timing.json``'s fields)."""
     n = result["episodes"]
     k = result.get("successes", round(result["success_rate"] * n))  # (older summaries)
     return {"success_rate": result["success_rate"], "successes": k,
@@ -265,8 +273,7 @@ def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | No
             "eval_wall_s": eval_timing.get("eval_wall_s"),
             "machines": {"train": train_timing.get("machines", []),
                          "eval": eval_timing.get("machines", [])},
-            "memory": memory_of(spec, get_task(task).tmc, cfg), "checkpoint": str(ckpt),
-            "evaluation": str(evals),
+            "checkpoint": str(ckpt), "evaluation": str(evals),
             **({"gym_id": result["gym_id"]} if result.get("gym_id") else {})}  # (older summaries)
 
 

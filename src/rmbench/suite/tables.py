@@ -103,9 +103,11 @@ def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] 
     return lines
 
 
-def difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0") -> list[str]:
+def difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0",
+                     labels: dict[str, str] | None = None) -> list[str]:
     """Per task, ``base`` minus each column in points with the difference's 95% interval;
-    "*" where the interval excludes zero, "—" where either cell is missing."""
+    "*" where the interval excludes zero, "—" where either cell is missing. ``labels``: a
+    task's name in the table, where it is not the task's own."""
     others = [s for s in specs if s != base]
     lines = ["| task | TMC | " + " | ".join(f"{column(base)} − {column(s)}" for s in others)
              + " |", "|---|---|" + "---|" * len(others)]
@@ -121,7 +123,8 @@ def difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0") 
                 d, (low, high) = diffs[s]["difference"], diffs[s]["ci95"]
                 values.append(f"{100 * d:+.0f} [{100 * low:+.0f}, {100 * high:+.0f}]"
                               + ("*" if diffs[s]["outside_noise"] else ""))
-        lines.append(f"| {task} | {get_task(task).tmc} | " + " | ".join(values) + " |")
+        label = (labels or {}).get(task, task)
+        lines.append(f"| {label} | {get_task(task).tmc} | " + " | ".join(values) + " |")
     return lines
 
 
