@@ -13,6 +13,13 @@ from). Each recorded cell replaces its task's and column's cell. A replaced cell
 another dataset format or run on another task version moves to ``superseded`` under
 ``--why``, so no measurement is dropped; otherwise it was the same recipe measured before, or
 one of the seeds the new cell pools.
+
+``--seed N`` records the source's cells as training seed N of the cells already recorded, and
+the recorded cell pools its seeds (``suite.stages.pooled_row``): so a seed evaluated in one
+folder joins one evaluated in another (a planner refit's seed 0, a table's seed 1).
+
+    python benchmarks/table_state.py --table runs/table_state --tasks press_button \
+        --specs mem0 --seed 1 --dataset rmbench/2 --why "..."
 A recorded cell keeps the command that made it and the dataset format it trained on. The
 file is written atomically.
 """
@@ -25,24 +32,57 @@ from dataclasses import asdict
 from pathlib import Path
 
 from rmbench.eval.chance import chance
+from rmbench.suite.plan import split_seed
+from rmbench.suite.plan import with_seed as with_seed_suffix
 from rmbench.suite.records import cell_record, evaluation_rows
+from rmbench.suite.stages import pooled_row
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "table_state.json"
 
 
+def with_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:
+    """The recorded cell ``old`` with ``new`` as its training seed ``seed``: every seed's
+    record under ``seeds`` (a cell of one seed is seed 0), the cell their pool. Each seed
+    keeps its own command; seeds of other data or another task version do not pool."""
+    if old is None:
+        raise SystemExit(f"{task} {column}: no recorded cell to add seed {seed} to")
+    if (old.get("dataset"), recorded_gym_id(task, old)) != (
+            new["dataset"], recorded_gym_id(task, new)):
+        raise SystemExit(f"{task} {column}: seed {seed} trained on {new['dataset']} "
+                         f"({recorded_gym_id(task, new)}), the recorded cell on "
+                         f"{old.get('dataset')} ({recorded_gym_id(task, old)})")
+    seeds = {int(s): r for s, r in old["seeds"].items()} if "seeds" in old else {0: old}
+    seeds[seed] = new
+    seeds = {s: {**r, "gym_id": recorded_gym_id(task, r)} for s, r in seeds.items()}
+    commands = "; ".join(dict.fromkeys(seeds[s]["command"] for s in sorted(seeds)
+                                       if seeds[s].get("command")))
+    return {**pooled_row(seeds), "dataset": new["dataset"], "command": commands}
+
+
 def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: str,
-           why: str, table: str) -> dict:
-    """``doc`` with ``run``'s cells of ``tasks`` x ``specs`` in place of its own."""
+           why: str, table: str, seed: int | None = None) -> dict:
+    """``doc`` with ``run``'s cells of ``tasks`` x ``specs`` in place of its own (or, with
+    ``seed``, added to its own as that training seed)."""
     replaced: dict[str, dict] = {}
     for task in tasks:
         for spec in specs:
             row = run["cells"].get(task, {}).get(spec)
             if row is None:
                 raise SystemExit(f"{table}: {task} {spec} is not evaluated yet")
-            old = doc["cells"].setdefault(task, {}).get(spec)
             new = {**cell_record(row, task), "dataset": dataset, "command": run["command"]}
+            if seed is not None:
+                # a table's column is its seeds' pool: it must be this seed alone
+                ran = [s for s in (run.get("plan") or {}).get("policies", [])
+                       if split_seed(s)[0] == spec]
+                if run.get("plan") and ran != [with_seed_suffix(spec, seed)]:
+                    raise SystemExit(f"{table}: its {spec} column is {ran}, not seed {seed} "
+                                     f"alone")
+                doc["cells"].setdefault(task, {})[spec] = with_seed(
+                    doc["cells"].get(task, {}).get(spec), new, seed, task, spec)
+                continue
+            old = doc["cells"].setdefault(task, {}).get(spec)
             # a cell of the same data and task version is the same recipe measured before
             # (or one of the seeds the new cell pools): the new one stands for it
             if old is not None and (old.get("dataset"), recorded_gym_id(task, old)) != (
@@ -69,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--specs", required=True)
     p.add_argument("--dataset", required=True, help="the format the cells trained on (rmbench/N)")
     p.add_argument("--why", required=True, help="why the replaced cells no longer stand, in words")
+    p.add_argument("--seed", type=int, help="the cells are this training seed of the recorded "
+                                             "ones: pool them")
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
     if args.evaluation and "," in args.specs:
@@ -76,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     run = (json.loads((Path(args.table) / "table.json").read_text()) if args.table
            else evaluation_rows(Path(args.evaluation), args.specs))
     doc = record(json.loads(args.out.read_text()), run, args.tasks.split(","),
-                 args.specs.split(","), args.dataset, args.why, args.table or args.evaluation)
+                 args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
+                 args.seed)
     write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
     print(f"wrote {args.out}")
     return 0

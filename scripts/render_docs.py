@@ -273,15 +273,28 @@ def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
             rec = c.get("record", {})
             progress = f"{c['mean_progress']:.3f}" + (f" ({rec['progress']})" if "progress" in rec else "")
             endings = ", ".join(f"{k} {v}" for k, v in c["endings"].items() if v)
+            # a cell pooled over training seeds: each seed's success and walls
+            seeds = c.get("seeds") or {"0": c}
+            success = f"{c['successes']}/{c['episodes']}" + (
+                " (seeds " + ", ".join(f"{s}: {r['successes']}" for s, r in seeds.items()) + ")"
+                if len(seeds) > 1 else "")
             train = rec.get("train_wall") or ("(Mem-0's checkpoint)" if spec == "mem0:gt_classifier"
-                                              else minutes(c["train_wall_s"]))
-            if "planner_refit" in c and spec != "mem0:gt_classifier":
-                train += " (the executor), then its planner refit (`benchmarks/planner_refit.py`)"
+                                              else " + ".join(_train_wall(r, s, len(seeds) > 1)
+                                                              for s, r in seeds.items()))
             failures = rec.get("failures") or "; ".join(
                 f"{why} {n}" for why, n in list(c["failure_reasons"].items())[:4])
-            rows.append([task.name, f"`{spec}`", f"{c['successes']}/{c['episodes']}", progress, endings,
-                         failures, train, rec.get("eval_wall") or minutes(c["eval_wall_s"])])
+            evals = " + ".join(minutes(r["eval_wall_s"]) for r in seeds.values())
+            rows.append([task.name, f"`{spec}`", success, progress, endings,
+                         failures, train, rec.get("eval_wall") or evals])
     return rows
+
+
+def _train_wall(cell: dict, seed: str, named: bool) -> str:
+    """One training's wall; a planner refit's is its executor's, the refit said so."""
+    wall = minutes(cell["train_wall_s"])
+    if "planner_refit" in cell:
+        wall += " (the executor), then its planner refit (`benchmarks/planner_refit.py`)"
+    return f"{wall} (seed {seed})" if named else wall
 
 
 RECORD_HEADER = ["task", "policy", "success", "progress", "endings", "most frequent failures",
@@ -305,7 +318,9 @@ def state_cost() -> str:
     """The table's wall time, summed over what the records kept (``gt_classifier`` evaluates
     Mem-0's checkpoint and trains nothing)."""
     res = load("table_state.json")
-    cells = [(s, c) for row in res["cells"].values() for s, c in row.items()]
+    # a cell pooled over training seeds is one training and one evaluation per seed
+    cells = [(s, r) for row in res["cells"].values() for s, c in row.items()
+             for r in (c.get("seeds") or {"0": c}).values()]
     trained = [c for s, c in cells if s != "mem0:gt_classifier"]
     kept = [c["train_wall_s"] for c in trained if c["train_wall_s"] is not None]
     partial = sum(1 for c in trained if c["train_wall_from_step"])
@@ -316,7 +331,13 @@ def state_cost() -> str:
             ["of them timed from a resumed step (the earlier pieces' walls not kept)", str(partial), ""],
             ["of them wholly or partly on a GPU", str(gpu), ""],
             ["evaluations (100 episodes each)", str(len(evals)), f"{sum(evals) / 3600:.1f} h"]]
-    return markdown(["what", "cells", "wall time"], rows)
+    return markdown(["what", "count", "wall time"], rows)
+
+
+def _one_eval(cell: dict) -> float | None:
+    """One evaluation's wall: a cell pooled over training seeds ran one per seed."""
+    walls = [r["eval_wall_s"] for r in (cell.get("seeds") or {"0": cell}).values()]
+    return None if None in walls else sum(walls) / len(walls)
 
 
 def eval_walls() -> str:
@@ -326,7 +347,7 @@ def eval_walls() -> str:
     for task in ordered():
         row = res["cells"][task.name]
         rows.append([task.name, task.step_limit,
-                     *(minutes(row[s]["eval_wall_s"]) for s in ("mem0", "dp", "act"))])
+                     *(minutes(_one_eval(row[s])) for s in ("mem0", "dp", "act"))])
     return markdown(["task", "step limit", "Mem-0", "DP", "ACT"], rows)
 
 

@@ -91,3 +91,42 @@ def test_an_evaluation_folder_gives_one_column_with_its_checkpoints_history(tmp_
     assert row["failure_reasons"] == {"timeout": 1} and row["gym_id"] == "rmbench/PressButton-v2"
     assert row["checkpoint"] == str(refit)
     assert res["command"].startswith("rmbench eval --task press_button --policy mem0:")
+
+
+def _seed_row(k, **extra):
+    return {"successes": k, "episodes": 100, "mean_progress": 0.5,
+            "endings": {"success": k, "task_failure": 100 - k},
+            "failure_reasons": {"wrong count": 100 - k}, "train_wall_s": 10.0,
+            "eval_wall_s": 5.0, "machines": {"train": ["a"], "eval": ["b"]}, **extra}
+
+
+def test_a_seed_joins_the_recorded_cell_and_the_cell_is_their_pool(table_state):
+    """A refit's seed 0 (an evaluation folder, recorded before versions were kept) and a
+    table's seed 1 pool into one cell: the mean, both records, both commands."""
+    doc = {"cells": {"press_button": {"mem0": {**_seed_row(69), "dataset": "rmbench/2",
+                                               "command": "rmbench eval ..."}}},
+           "chance": {}, "superseded": []}
+    run = {"command": "rmbench table ...", "chance": {"press_button": {"rate": 0.011}},
+           "plan": {"policies": ["mem0@1"]},
+           "cells": {"press_button": {"mem0": _seed_row(61, gym_id="rmbench/PressButton-v2")}}}
+    doc = table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/2", "x", "t", seed=1)
+    cell = doc["cells"]["press_button"]["mem0"]
+    assert (cell["successes"], cell["episodes"], cell["success_rate"]) == (130, 200, 0.65)
+    assert cell["seeds"]["0"]["successes"] == 69 and cell["seeds"]["1"]["successes"] == 61
+    assert cell["command"] == "rmbench eval ...; rmbench table ..."
+    assert cell["failure_reasons"] == {"wrong count": 70} and doc["superseded"] == []
+    # recording the same seed again replaces it rather than pooling it twice
+    doc = table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/2", "x", "t", seed=1)
+    assert doc["cells"]["press_button"]["mem0"]["episodes"] == 200
+
+
+def test_a_seed_of_other_data_or_a_pooled_column_is_refused(table_state):
+    doc = {"cells": {"press_button": {"mem0": {**_seed_row(69), "dataset": "rmbench/1"}}},
+           "chance": {}, "superseded": []}
+    run = {"command": "c", "plan": {"policies": ["mem0@1"]},
+           "cells": {"press_button": {"mem0": _seed_row(61)}}}
+    with pytest.raises(SystemExit, match="seed 1 trained on rmbench/2"):
+        table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/2", "x", "t", seed=1)
+    run["plan"] = {"policies": ["mem0", "mem0@1"]}
+    with pytest.raises(SystemExit, match=r"column is \['mem0', 'mem0@1'\], not seed 1 alone"):
+        table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/1", "x", "t", seed=1)

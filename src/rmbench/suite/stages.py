@@ -303,6 +303,6 @@ def pooled_row(rows: dict[int, dict[str, Any] | None]) -> dict[str, Any] | None:
             **walls, "train_wall_from_step": 0,
             "machines": {stage: [m for r in seeds for m in r["machines"][stage]]
                          for stage in ("train", "eval")},
-            "memory": seeds[0]["memory"],
+            **({"memory": seeds[0]["memory"]} if "memory" in seeds[0] else {}),
             **({"gym_id": seeds[0]["gym_id"]} if "gym_id" in seeds[0] else {}),
             "seeds": {str(s): rows[s] for s in sorted(rows)}}
