@@ -220,6 +220,22 @@ def state_differences() -> str:
             + _footnote(text, marks="‡" if "‡" in text else ""))
 
 
+def state_seeds() -> str:
+    """The cells pooled over training seeds: each seed's rate, the pool's, and how far apart
+    the seeds are (the training's noise, which one seed's interval does not cover)."""
+    res = load("table_state.json")
+    pooled = [(task.name, spec, cell) for task in ordered()
+              for spec, cell in res["cells"].get(task.name, {}).items() if cell.get("seeds")]
+    names = sorted({k for _, _, cell in pooled for k in cell["seeds"]}, key=int)
+    rows = []
+    for task, spec, cell in pooled:
+        pcts = [100 * r["successes"] / r["episodes"] for r in cell["seeds"].values()]
+        rows.append([task, COLUMN[spec], *(rate(cell["seeds"].get(k)) for k in names),
+                     rate(cell), f"{max(pcts) - min(pcts):.0f}"])
+    return markdown(["task", "column", *(f"seed {k}" for k in names), "pooled",
+                     "spread (points)"], rows)
+
+
 def mn_recipe() -> str:
     """Mem-0's M(n) recipe candidates (``benchmarks/mn_recipe.py``), the first the table's
     recipe on format 1 data: each cell a rate with its interval, and for Mem-0 where its
@@ -561,6 +577,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "tasks": tasks,
     "readme-results": readme_results, "state-policies": state_policies,
     "state-ablations": state_ablations, "state-differences": state_differences,
+    "state-seeds": state_seeds,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,
     "state-records": state_records,
     "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,
