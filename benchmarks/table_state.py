@@ -14,12 +14,15 @@ another dataset format or run on another task version moves to ``superseded`` un
 ``--why``, so no measurement is dropped; otherwise it was the same recipe measured before, or
 one of the seeds the new cell pools.
 
-``--seed N`` records the source's cells as training seed N of the cells already recorded, and
-the recorded cell pools its seeds (``suite.stages.pooled_row``): so a seed evaluated in one
-folder joins one evaluated in another (a planner refit's seed 0, a table's seed 1).
+``--seed N`` records the source's cells as training seed N of the cells already recorded
+(a recorded cell of one seed is seed 0), and the recorded cell becomes the pool of its seeds
+(``suite.stages.pooled_row``): so a seed evaluated in one folder joins one evaluated in
+another (a planner refit's seed 0, a table's seed 1). Recording seed N again replaces it. A
+pooled cell is replaced only seed by seed, never by a cell of one seed.
 
-    python benchmarks/table_state.py --table runs/table_state --tasks press_button \
-        --specs mem0 --seed 1 --dataset rmbench/2 --why "..."
+    python benchmarks/table_state.py --table runs/table_state --tasks press_button \\
+        --specs mem0 --seed 1 --dataset rmbench/2
+
 A recorded cell keeps the command that made it and the dataset format it trained on. The
 file is written atomically.
 """
@@ -34,7 +37,7 @@ from pathlib import Path
 from rmbench.eval.chance import chance
 from rmbench.suite.plan import split_seed
 from rmbench.suite.plan import with_seed as with_seed_suffix
-from rmbench.suite.records import cell_record, evaluation_rows
+from rmbench.suite.records import cell_record, evaluation_rows, seed_records
 from rmbench.suite.stages import pooled_row
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
@@ -44,17 +47,22 @@ OUT = Path(__file__).resolve().parent / "results" / "table_state.json"
 
 def with_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:
     """The recorded cell ``old`` with ``new`` as its training seed ``seed``: every seed's
-    record under ``seeds`` (a cell of one seed is seed 0), the cell their pool. Each seed
-    keeps its own command; seeds of other data or another task version do not pool."""
+    record under ``seeds``, the cell their pool. Each seed keeps its own command; seeds of
+    other data or another task version do not pool."""
     if old is None:
         raise SystemExit(f"{task} {column}: no recorded cell to add seed {seed} to")
+    if "seeds" in new:
+        raise SystemExit(f"{task} {column}: the new cell pools seeds {sorted(new['seeds'])}; "
+                         f"record one seed")
     if (old.get("dataset"), recorded_gym_id(task, old)) != (
             new["dataset"], recorded_gym_id(task, new)):
         raise SystemExit(f"{task} {column}: seed {seed} trained on {new['dataset']} "
                          f"({recorded_gym_id(task, new)}), the recorded cell on "
                          f"{old.get('dataset')} ({recorded_gym_id(task, old)})")
-    seeds = {int(s): r for s, r in old["seeds"].items()} if "seeds" in old else {0: old}
+    seeds = {int(s): r for s, r in seed_records(old).items()}
     seeds[seed] = new
+    if len(seeds) == 1:  # seed 0 of a cell of one seed: the cell itself
+        return new
     seeds = {s: {**r, "gym_id": recorded_gym_id(task, r)} for s, r in seeds.items()}
     commands = "; ".join(dict.fromkeys(seeds[s]["command"] for s in sorted(seeds)
                                        if seeds[s].get("command")))
@@ -83,6 +91,9 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                     doc["cells"].get(task, {}).get(spec), new, seed, task, spec)
                 continue
             old = doc["cells"].setdefault(task, {}).get(spec)
+            if old is not None and "seeds" in old and "seeds" not in new:
+                raise SystemExit(f"{task} {spec}: the recorded cell pools seeds "
+                                 f"{sorted(old['seeds'])}; give --seed to replace one")
             # a cell of the same data and task version is the same recipe measured before
             # (or one of the seeds the new cell pools): the new one stands for it
             if old is not None and (old.get("dataset"), recorded_gym_id(task, old)) != (
@@ -108,11 +119,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--tasks", required=True)
     p.add_argument("--specs", required=True)
     p.add_argument("--dataset", required=True, help="the format the cells trained on (rmbench/N)")
-    p.add_argument("--why", required=True, help="why the replaced cells no longer stand, in words")
+    p.add_argument("--why", help="why the replaced cells no longer stand, in words (a cell of "
+                                  "other data or another task version moves to superseded)")
     p.add_argument("--seed", type=int, help="the cells are this training seed of the recorded "
                                              "ones: pool them")
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
+    if args.seed is None and not args.why:
+        raise SystemExit("--why: say why the cells this replaces no longer stand")
+    if args.seed is not None and args.seed < 0:
+        raise SystemExit(f"--seed {args.seed}: a training seed is 0 or more")
     if args.evaluation and "," in args.specs:
         raise SystemExit("--evaluation records one column: give one --specs")
     run = (json.loads((Path(args.table) / "table.json").read_text()) if args.table

@@ -29,6 +29,7 @@ from rmbench.eval.chance import chance
 from rmbench.eval.intervals import format_rate
 from rmbench.eval.report import PUBLISHED, Rate
 from rmbench.suite.plan import applies
+from rmbench.suite.records import seed_records
 from rmbench.suite.tables import PUBLISHED_ABLATIONS, difference_table, differences
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered, recorded_gym_id
@@ -225,7 +226,7 @@ def state_seeds() -> str:
     the seeds are (the training's noise, which one seed's interval does not cover)."""
     res = load("table_state.json")
     pooled = [(task.name, spec, cell) for task in ordered()
-              for spec, cell in res["cells"].get(task.name, {}).items() if cell.get("seeds")]
+              for spec, cell in res["cells"].get(task.name, {}).items() if "seeds" in cell]
     names = sorted({k for _, _, cell in pooled for k in cell["seeds"]}, key=int)
     rows = []
     for task, spec, cell in pooled:
@@ -251,8 +252,7 @@ def mn_recipe() -> str:
                 continue
             mem0 = row.get("mem0") or {}
             # a cell pooled over training seeds: each seed's ends, added up
-            runs = [c.get("boundaries") for c in mem0.get("seeds", {}).values()] or \
-                [mem0.get("boundaries")]
+            runs = [c.get("boundaries") for c in seed_records(mem0).values()]
             verdicts = ("on_time", "early", "late", "missed", "false")
             ends = ("—" if not all(runs) else
                     "/".join(str(sum(r[v] for r in runs)) for v in verdicts))
@@ -289,25 +289,33 @@ def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
             rec = c.get("record", {})
             progress = f"{c['mean_progress']:.3f}" + (f" ({rec['progress']})" if "progress" in rec else "")
             endings = ", ".join(f"{k} {v}" for k, v in c["endings"].items() if v)
-            # a cell pooled over training seeds: each seed's success and walls
-            seeds = c.get("seeds") or {"0": c}
+            # a cell pooled over training seeds: each seed's success and walls (a seed's
+            # hand-written record, where it has one, says how its wall was kept)
+            seeds = seed_records(c)
+            named = len(seeds) > 1
             success = f"{c['successes']}/{c['episodes']}" + (
                 " (seeds " + ", ".join(f"{s}: {r['successes']}" for s, r in seeds.items()) + ")"
-                if len(seeds) > 1 else "")
-            train = rec.get("train_wall") or ("(Mem-0's checkpoint)" if spec == "mem0:gt_classifier"
-                                              else " + ".join(_train_wall(r, s, len(seeds) > 1)
-                                                              for s, r in seeds.items()))
+                if named else "")
+            train = ("(Mem-0's checkpoint)" if spec == "mem0:gt_classifier" and not named
+                     else "(Mem-0's checkpoints)" if spec == "mem0:gt_classifier"
+                     else " + ".join(_train_wall(r, s, named) for s, r in seeds.items()))
             failures = rec.get("failures") or "; ".join(
                 f"{why} {n}" for why, n in list(c["failure_reasons"].items())[:4])
-            evals = " + ".join(minutes(r["eval_wall_s"]) for r in seeds.values())
+            evals = " + ".join(_seed_wall(r, "eval", s, named) for s, r in seeds.items())
             rows.append([task.name, f"`{spec}`", success, progress, endings,
-                         failures, train, rec.get("eval_wall") or evals])
+                         failures, train, evals])
     return rows
+
+
+def _seed_wall(cell: dict, stage: str, seed: str, named: bool) -> str:
+    """One seed's training or evaluation wall: its record's words where it has them."""
+    wall = cell.get("record", {}).get(f"{stage}_wall") or minutes(cell[f"{stage}_wall_s"])
+    return f"{wall} (seed {seed})" if named else wall
 
 
 def _train_wall(cell: dict, seed: str, named: bool) -> str:
     """One training's wall; a planner refit's is its executor's, the refit said so."""
-    wall = minutes(cell["train_wall_s"])
+    wall = _seed_wall(cell, "train", seed, False)
     if "planner_refit" in cell:
         wall += " (the executor), then its planner refit (`benchmarks/planner_refit.py`)"
     return f"{wall} (seed {seed})" if named else wall
@@ -336,7 +344,7 @@ def state_cost() -> str:
     res = load("table_state.json")
     # a cell pooled over training seeds is one training and one evaluation per seed
     cells = [(s, r) for row in res["cells"].values() for s, c in row.items()
-             for r in (c.get("seeds") or {"0": c}).values()]
+             for r in seed_records(c).values()]
     trained = [c for s, c in cells if s != "mem0:gt_classifier"]
     kept = [c["train_wall_s"] for c in trained if c["train_wall_s"] is not None]
     partial = sum(1 for c in trained if c["train_wall_from_step"])
@@ -352,7 +360,7 @@ def state_cost() -> str:
 
 def _one_eval(cell: dict) -> float | None:
     """One evaluation's wall: a cell pooled over training seeds ran one per seed."""
-    walls = [r["eval_wall_s"] for r in (cell.get("seeds") or {"0": cell}).values()]
+    walls = [r["eval_wall_s"] for r in seed_records(cell).values()]
     return None if None in walls else sum(walls) / len(walls)
 
 

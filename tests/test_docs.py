@@ -45,3 +45,25 @@ def test_an_unknown_table_is_an_error(tmp_path):
 def test_results_pages_start_with_their_table(page):
     lines = page.read_text().splitlines()[:40]
     assert any(re.match(r"^\|.*\|$", line) for line in lines), f"{page.name}: no table in its first 40 lines"
+
+
+def test_a_cell_pooled_over_seeds_shows_each_seed():
+    """A pooled cell's record names each seed's success and walls (a seed's hand-written wall
+    where it has one), and one evaluation's wall is the seeds' mean."""
+    render_docs = _render_docs()
+
+    def seed(k, train, evals, **extra):
+        return {"successes": k, "episodes": 100, "train_wall_s": train, "eval_wall_s": evals,
+                **extra}
+
+    cell = {"successes": 130, "episodes": 200, "mean_progress": 0.9,
+            "endings": {"success": 130, "task_failure": 70}, "failure_reasons": {"short": 70},
+            "seeds": {"0": seed(69, 600.0, 300.0, record={"train_wall": "10 min on a GPU"},
+                                planner_refit={"from": "x"}),
+                      "1": seed(61, 1200.0, 180.0)}}
+    (row,) = render_docs._record_rows({"press_button": {"mem0": cell}})
+    assert row[2] == "130/200 (seeds 0: 69, 1: 61)"
+    assert row[6].startswith("10 min on a GPU (the executor), then its planner refit")
+    assert row[6].endswith("(seed 0) + 20.0 min (seed 1)")
+    assert row[7] == "5.0 min (seed 0) + 3.0 min (seed 1)"
+    assert render_docs._one_eval(cell) == 240.0

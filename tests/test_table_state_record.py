@@ -116,8 +116,25 @@ def test_a_seed_joins_the_recorded_cell_and_the_cell_is_their_pool(table_state):
     assert cell["command"] == "rmbench eval ...; rmbench table ..."
     assert cell["failure_reasons"] == {"wrong count": 70} and doc["superseded"] == []
     # recording the same seed again replaces it rather than pooling it twice
+    run["cells"]["press_button"]["mem0"] = _seed_row(70, gym_id="rmbench/PressButton-v2")
     doc = table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/2", "x", "t", seed=1)
-    assert doc["cells"]["press_button"]["mem0"]["episodes"] == 200
+    cell = doc["cells"]["press_button"]["mem0"]
+    assert (cell["successes"], cell["episodes"], cell["seeds"]["1"]["successes"]) == (139, 200, 70)
+    # a cell of one seed does not replace the pool (seed 1 would be lost without a trace)
+    with pytest.raises(SystemExit, match=r"pools seeds \['0', '1'\]; give --seed"):
+        table_state.record(doc, _run(), ["press_button"], ["mem0"], "rmbench/2", "x", "t")
+
+
+def test_a_seed_from_an_evaluation_folder_pools_and_keeps_a_memory_it_knows(table_state):
+    """An eval folder's row (no plan, no memory in words) joins a table's seed 0."""
+    doc = {"cells": {"press_button": {"mem0": {**_seed_row(69, memory="anchor + window"),
+                                               "dataset": "rmbench/2", "command": "t0"}}},
+           "chance": {}, "superseded": []}
+    run = {"command": "rmbench eval ...", "plan": None,
+           "cells": {"press_button": {"mem0": _seed_row(61)}}}
+    doc = table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/2", "x", "t", seed=1)
+    cell = doc["cells"]["press_button"]["mem0"]
+    assert cell["memory"] == "anchor + window" and cell["episodes"] == 200
 
 
 def test_a_seed_of_other_data_or_a_pooled_column_is_refused(table_state):
@@ -127,6 +144,32 @@ def test_a_seed_of_other_data_or_a_pooled_column_is_refused(table_state):
            "cells": {"press_button": {"mem0": _seed_row(61)}}}
     with pytest.raises(SystemExit, match="seed 1 trained on rmbench/2"):
         table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/2", "x", "t", seed=1)
+    with pytest.raises(SystemExit, match="no recorded cell to add seed 1 to"):
+        table_state.record({"cells": {}, "chance": {}}, run, ["press_button"], ["mem0"],
+                           "rmbench/1", "x", "t", seed=1)
     run["plan"] = {"policies": ["mem0", "mem0@1"]}
     with pytest.raises(SystemExit, match=r"column is \['mem0', 'mem0@1'\], not seed 1 alone"):
         table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/1", "x", "t", seed=1)
+    run["plan"] = None  # a pooled row from a source that names no plan
+    run["cells"]["press_button"]["mem0"] = {**_seed_row(61), "seeds": {"0": {}, "1": {}}}
+    with pytest.raises(SystemExit, match=r"pools seeds \['0', '1'\]; record one seed"):
+        table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/1", "x", "t", seed=2)
+
+
+def test_a_seed_of_another_task_version_is_refused(table_state):
+    doc = {"cells": {"battery_try": {"mem0": {**_seed_row(94), "dataset": "rmbench/2"}}},
+           "chance": {}, "superseded": []}  # recorded before versions were kept: v1
+    run = {"command": "c", "plan": None,
+           "cells": {"battery_try": {"mem0": _seed_row(99, gym_id="rmbench/BatteryTry-v2")}}}
+    with pytest.raises(SystemExit, match=r"\(rmbench/BatteryTry-v2\), the recorded cell on "
+                                         r"rmbench/2 \(rmbench/BatteryTry-v1\)"):
+        table_state.record(doc, run, ["battery_try"], ["mem0"], "rmbench/2", "x", "t", seed=1)
+
+
+def test_the_command_line_refuses_a_negative_seed_and_a_missing_why(table_state):
+    with pytest.raises(SystemExit, match="a training seed is 0 or more"):
+        table_state.main(["--table", "t", "--tasks", "press_button", "--specs", "mem0",
+                          "--dataset", "rmbench/2", "--seed", "-1"])
+    with pytest.raises(SystemExit, match="--why: say why"):
+        table_state.main(["--table", "t", "--tasks", "press_button", "--specs", "mem0",
+                          "--dataset", "rmbench/2"])

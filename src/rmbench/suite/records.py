@@ -22,6 +22,12 @@ KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress"
         "memory", "gym_id", "planner_refit")
 
 
+def seed_records(cell: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """A cell's record per training seed (``{"0": ..., "1": ...}``): its ``seeds``, or the
+    cell itself as seed 0 when it has one."""
+    return cell.get("seeds") or {"0": cell}
+
+
 def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
     """``row`` (a cell of ``table.json``) as a results file keeps it. Reads the cell's
     evaluation records and checkpoint folder, so it runs where the table ran."""

@@ -303,6 +303,7 @@ def pooled_row(rows: dict[int, dict[str, Any] | None]) -> dict[str, Any] | None:
             **walls, "train_wall_from_step": 0,
             "machines": {stage: [m for r in seeds for m in r["machines"][stage]]
                          for stage in ("train", "eval")},
-            **({"memory": seeds[0]["memory"]} if "memory" in seeds[0] else {}),
+            # a row of an eval folder (evaluation_rows) says nothing of memory; another may
+            **next(({"memory": r["memory"]} for r in seeds if "memory" in r), {}),
             **({"gym_id": seeds[0]["gym_id"]} if "gym_id" in seeds[0] else {}),
             "seeds": {str(s): rows[s] for s in sorted(rows)}}
