@@ -35,8 +35,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from rmbench.eval.chance import chance
-from rmbench.suite.plan import split_seed
-from rmbench.suite.plan import with_seed as with_seed_suffix
+from rmbench.suite.plan import split_seed, with_seed
 from rmbench.suite.records import cell_record, evaluation_rows, seed_records
 from rmbench.suite.stages import pooled_row
 from rmbench.tasks.registry import recorded_gym_id
@@ -45,7 +44,13 @@ from rmbench.video import write_atomic
 OUT = Path(__file__).resolve().parent / "results" / "table_state.json"
 
 
-def with_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:
+def _version(task: str, cell: dict) -> tuple:
+    """What a cell was measured on: its dataset format and task version. Cells of one such
+    pair are one recipe's measurements; others do not replace or pool with them."""
+    return cell.get("dataset"), recorded_gym_id(task, cell)
+
+
+def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:
     """The recorded cell ``old`` with ``new`` as its training seed ``seed``: every seed's
     record under ``seeds``, the cell their pool. Each seed keeps its own command; seeds of
     other data or another task version do not pool."""
@@ -54,11 +59,10 @@ def with_seed(old: dict | None, new: dict, seed: int, task: str, column: str) ->
     if "seeds" in new:
         raise SystemExit(f"{task} {column}: the new cell pools seeds {sorted(new['seeds'])}; "
                          f"record one seed")
-    if (old.get("dataset"), recorded_gym_id(task, old)) != (
-            new["dataset"], recorded_gym_id(task, new)):
-        raise SystemExit(f"{task} {column}: seed {seed} trained on {new['dataset']} "
-                         f"({recorded_gym_id(task, new)}), the recorded cell on "
-                         f"{old.get('dataset')} ({recorded_gym_id(task, old)})")
+    if _version(task, old) != _version(task, new):
+        (ours, our_id), (theirs, their_id) = _version(task, new), _version(task, old)
+        raise SystemExit(f"{task} {column}: seed {seed} trained on {ours} ({our_id}), the "
+                         f"recorded cell on {theirs} ({their_id})")
     seeds = {int(s): r for s, r in seed_records(old).items()}
     seeds[seed] = new
     if len(seeds) == 1:  # seed 0 of a cell of one seed: the cell itself
@@ -84,10 +88,10 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                 # a table's column is its seeds' pool: it must be this seed alone
                 ran = [s for s in (run.get("plan") or {}).get("policies", [])
                        if split_seed(s)[0] == spec]
-                if run.get("plan") and ran != [with_seed_suffix(spec, seed)]:
+                if run.get("plan") and ran != [with_seed(spec, seed)]:
                     raise SystemExit(f"{table}: its {spec} column is {ran}, not seed {seed} "
                                      f"alone")
-                doc["cells"].setdefault(task, {})[spec] = with_seed(
+                doc["cells"].setdefault(task, {})[spec] = add_seed(
                     doc["cells"].get(task, {}).get(spec), new, seed, task, spec)
                 continue
             old = doc["cells"].setdefault(task, {}).get(spec)
@@ -96,8 +100,7 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                                  f"{sorted(old['seeds'])}; give --seed to replace one")
             # a cell of the same data and task version is the same recipe measured before
             # (or one of the seeds the new cell pools): the new one stands for it
-            if old is not None and (old.get("dataset"), recorded_gym_id(task, old)) != (
-                    dataset, recorded_gym_id(task, new)):
+            if old is not None and _version(task, old) != _version(task, new):
                 replaced.setdefault(task, {})[spec] = old
             doc["cells"][task][spec] = new
         doc["chance"][task] = run["chance"][task] if "chance" in run else asdict(chance(task))
