@@ -59,8 +59,8 @@ def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> 
     if "seeds" in new:
         raise SystemExit(f"{task} {column}: the new cell pools seeds {sorted(new['seeds'])}; "
                          f"record one seed")
-    if _version(task, old) != _version(task, new):
-        (ours, our_id), (theirs, their_id) = _version(task, new), _version(task, old)
+    (ours, our_id), (theirs, their_id) = _version(task, new), _version(task, old)
+    if (ours, our_id) != (theirs, their_id):
         raise SystemExit(f"{task} {column}: seed {seed} trained on {ours} ({our_id}), the "
                          f"recorded cell on {theirs} ({their_id})")
     seeds = {int(s): r for s, r in seed_records(old).items()}
