@@ -33,6 +33,13 @@ OBS_TYPES = ("pixels_agent_pos", "environment_state_agent_pos",
              "pixels_environment_state_agent_pos")
 
 
+def _inwards(bound: np.ndarray, towards: float) -> np.ndarray:
+    """``bound`` as float32, moved one float32 step ``towards`` where rounding put it past."""
+    b = bound.astype(np.float32)
+    past = b < bound if towards > 0 else b > bound
+    return np.where(past, np.nextafter(b, np.float32(towards)), b)
+
+
 class RMBenchEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
@@ -63,11 +70,11 @@ class RMBenchEnv(gym.Env):
         self.render_mode = render_mode
         self.step_limit = step_limit or task_cls.step_limit
 
-        # Measured joints may sit a hair outside their limits; the bounds leave room for that.
-        margin = np.tile(np.r_[np.full(6, 0.1), 0.5], 2)
-        agent_pos = gym.spaces.Box(self.sim.action_low - margin, self.sim.action_high + margin,
-                                   (ACTION_DIM,), np.float64)
-        spaces: dict[str, gym.Space] = {"agent_pos": agent_pos}
+        # agent_pos: each joint within its range in the model, the gripper within [0, 1] (its
+        # finger's range, mapped as agent_pos maps it); _observation clips to these.
+        low, high = self.sim.agent_pos_limits()
+        spaces: dict[str, gym.Space] = {
+            "agent_pos": gym.spaces.Box(low, high, (ACTION_DIM,), np.float64)}
         if render and obs_type.startswith("pixels"):
             spaces["pixels"] = gym.spaces.Dict({
                 cam: gym.spaces.Box(0, 255, (height, width, 3), np.uint8)
@@ -76,8 +83,12 @@ class RMBenchEnv(gym.Env):
             low, high = state_bounds(task_cls.state_names)
             spaces["environment_state"] = gym.spaces.Box(low, high, dtype=np.float64)
         self.observation_space = gym.spaces.Dict(spaces)
-        self.action_space = gym.spaces.Box(self.sim.action_low.astype(np.float32),
-                                           self.sim.action_high.astype(np.float32),
+        # The joint limits rounded inwards to float32: every action the space holds lies within
+        # them, so none of its actions is clipped (rounded to nearest, a bound would stand up
+        # to 1e-7 rad outside a limit). Absolute joint targets in radians, the layout of the
+        # datasets and of gym-aloha; Gymnasium's advice of a [-1, 1] action space does not fit.
+        self.action_space = gym.spaces.Box(_inwards(self.sim.action_low, np.inf),
+                                           _inwards(self.sim.action_high, -np.inf),
                                            dtype=np.float32)
         self._steps = 0
         self._done = True
@@ -167,14 +178,33 @@ class RMBenchEnv(gym.Env):
         return a
 
     def _observation(self, safe: bool = False) -> dict[str, Any]:
+        """The observation, within ``observation_space``. Only the returned arrays are
+        clipped, never the simulation's state: an episode is the same with or without it.
+
+        agent_pos: MuJoCo's joint limits are soft constraints, so a joint can stand past its
+        limit: a hair at rest (an open gripper reads 1 + 6e-7, its finger held against the
+        stop) and by centimetres under a hard load (a light finger on an arm that arbitrary
+        targets whip about at tens of rad/s reads beyond -2 and 2.5). The model bounds none
+        of that, and a reading past a limit is no pose the arm can take, so it reads as at
+        the limit rather than the space being widened by a guess.
+
+        environment_state: nothing walls the room (an arm swung at arbitrary targets can
+        throw a piece 10 m), so a position reads as at the edge of the declared 5 m around
+        the table, further than any camera sees (a cap pushed past its stop, a soft limit
+        too, likewise reads at 5 cm); headings, flags, one-hots and colours lie within their
+        bounds by construction."""
         pos = self.sim.agent_pos()
         if safe:
             pos = np.nan_to_num(pos, nan=0.0, posinf=0.0, neginf=0.0)
-        obs: dict[str, Any] = {"agent_pos": pos}
+        space = self.observation_space.spaces
+        obs: dict[str, Any] = {"agent_pos": np.clip(pos, space["agent_pos"].low,
+                                                    space["agent_pos"].high)}
         if self.with_state:
             state = self.task.environment_state()
-            obs["environment_state"] = (np.nan_to_num(state, nan=0.0, posinf=0.0, neginf=0.0)
-                                        if safe else state)
+            if safe:
+                state = np.nan_to_num(state, nan=0.0, posinf=0.0, neginf=0.0)
+            obs["environment_state"] = np.clip(state, space["environment_state"].low,
+                                               space["environment_state"].high)
         if self.config.render and self.obs_type.startswith("pixels"):
             if safe:
                 obs["pixels"] = {c: np.zeros((self.config.height, self.config.width, 3), np.uint8)

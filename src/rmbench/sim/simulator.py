@@ -36,6 +36,12 @@ def servo_setpoint(setpoint: np.ndarray, start: np.ndarray, goal: np.ndarray, fr
     return setpoint + gain * (start + (goal - start) * fraction - setpoint)
 
 
+def gripper_opening(finger):
+    """A finger's slide position (metres from the gripper's centre line) as the gripper
+    opening agent_pos reports: 0 at the closed end of its range, 1 at the open end."""
+    return (finger - robot.FINGER_CLOSED) / (robot.FINGER_OPEN - robot.FINGER_CLOSED)
+
+
 def data_renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Renderer:
     """A renderer set up for data cameras: no shadows, reflections or skybox (the model's
     offscreen buffer already has anti-aliasing off)."""
@@ -108,14 +114,26 @@ class Simulator:
         return ctrl
 
     def agent_pos(self) -> np.ndarray:
-        """Proprioception in the action layout: 6 joints + gripper opening in [0, 1], per arm."""
+        """Proprioception in the action layout: 6 joints + gripper opening, per arm, as the
+        physics has them (a joint can stand past its limit: see RMBenchEnv._observation)."""
         out = np.empty(ACTION_DIM)
-        span = robot.FINGER_OPEN - robot.FINGER_CLOSED
         for k, side in enumerate(robot.SIDES):
             out[7 * k: 7 * k + 6] = self.data.qpos[self.arm_qpos[side]]
-            finger = self.data.qpos[self.finger_qpos[side][0]]
-            out[7 * k + 6] = (finger - robot.FINGER_CLOSED) / span
+            out[7 * k + 6] = gripper_opening(self.data.qpos[self.finger_qpos[side][0]])
         return out
+
+    def agent_pos_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per entry of agent_pos, the range the model's joint limits (``jnt_range``) give it:
+        an arm joint's own range; the gripper's, its finger's range through the mapping
+        agent_pos reads the finger with (which is exactly [0, 1])."""
+        m = self.model
+        low, high = np.empty(ACTION_DIM), np.empty(ACTION_DIM)
+        for k, side in enumerate(robot.SIDES):
+            low[7 * k: 7 * k + 6], high[7 * k: 7 * k + 6] = self.arm_range[side].T
+            # the finger agent_pos reads (finger_qpos[side][0])
+            finger = m.joint(f"{side}/left_finger").range
+            low[7 * k + 6], high[7 * k + 6] = gripper_opening(finger)
+        return low, high
 
     def ee_pose(self, data: mujoco.MjData | None = None) -> np.ndarray:
         """End-effector poses (14,): per arm the point between the fingertips (x, y, z, world
