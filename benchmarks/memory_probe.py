@@ -21,7 +21,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from rmbench.eval.intervals import difference, outside_noise, wilson
+from rmbench.eval.intervals import difference, format_difference, outside_noise, wilson
 from rmbench.eval.report import Rate
 from rmbench.machine import describe
 from rmbench.video import write_atomic
@@ -71,10 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     write_atomic(Path(args.out), (json.dumps(result, indent=1) + "\n").encode())
     w, r = probe["without"], probe["with"]
     print(f"{args.task}: {w['successes']}/{n} without the probe, {r['successes']}/{n} with it "
-          f"(drop {100 * probe['drop']:+.1f} [{100 * probe['drop_ci95'][0]:+.1f}, "
-          f"{100 * probe['drop_ci95'][1]:+.1f}]); {args.reference_cell} "
-          f"{ref['successes']}/{ref['episodes']}, probed minus it {100 * d:+.1f} "
-          f"[{100 * low:+.1f}, {100 * high:+.1f}]")
+          f"(drop {format_difference(probe['drop'], *probe['drop_ci95'], digits=1)}); "
+          f"{args.reference_cell} {ref['successes']}/{ref['episodes']}, probed minus it "
+          f"{format_difference(d, low, high, digits=1)}")
     return 0
 
 

@@ -23,7 +23,8 @@ pooled cell is replaced only seed by seed, never by a cell of one seed.
     python benchmarks/table_state.py --table runs/table_state --tasks press_button \\
         --specs mem0 --seed 1 --dataset rmbench/2
 
-A recorded cell keeps the command that made it and the dataset format it trained on. The
+A recorded cell keeps the command that made it, the dataset format it trained on and its
+walls' ``conditions`` (``suite/records.py``), every field null until edited in by hand. The
 file is written atomically.
 """
 
@@ -36,7 +37,7 @@ from pathlib import Path
 
 from rmbench.eval.chance import chance
 from rmbench.suite.plan import split_seed, with_seed
-from rmbench.suite.records import cell_record, evaluation_rows, seed_records
+from rmbench.suite.records import cell_record, evaluation_rows, seed_records, unstated_conditions
 from rmbench.suite.stages import pooled_row
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
@@ -83,7 +84,8 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
             row = run["cells"].get(task, {}).get(spec)
             if row is None:
                 raise SystemExit(f"{table}: {task} {spec} is not evaluated yet")
-            new = {**cell_record(row, task), "dataset": dataset, "command": run["command"]}
+            new = {"conditions": unstated_conditions(spec), **cell_record(row, task),
+                   "dataset": dataset, "command": run["command"]}
             if seed is not None:
                 # a table's column is its seeds' pool: it must be this seed alone
                 ran = [s for s in (run.get("plan") or {}).get("policies", [])

@@ -39,3 +39,15 @@ def test_difference_of_two_cells():
 
 def test_format_rate():
     assert format_rate(20, 100) == "20 [13, 29]"
+
+
+def test_a_difference_that_rounds_to_zero_prints_no_sign():
+    """'-9 [-18, 0]', never '[-18, -0]': a zero is on neither side."""
+    from rmbench.eval.intervals import format_difference, signed
+
+    assert format_difference(-0.09, -0.18, -0.004) == "-9 [-18, 0]"
+    assert format_difference(0.0, -0.02, 0.02) == "0 [-2, +2]"
+    assert format_difference(0.66, 0.54, 0.75) == "+66 [+54, +75]"
+    assert signed(-0.04, 1) == "0.0" and signed(-0.05001, 1) == "-0.1" and signed(0.4) == "0"
+    # press_button's Mem-0 (136/200) minus gt_classifier (154/200): an upper end of -0.24 points
+    assert format_difference(*difference(136, 200, 154, 200)) == "-9 [-18, 0]"

@@ -30,9 +30,14 @@ def _run(k=36):
 
 
 def test_a_cell_of_other_data_moves_to_superseded(table_state):
+    from rmbench.suite.records import unstated_conditions
+
     doc = table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", "format 1", "t")
-    assert doc["cells"]["press_button"]["mem0"] == {"successes": 36, "dataset": "rmbench/2",
-                                                     "command": "rmbench table ..."}
+    # its walls' conditions unstated until its record says them (suite/records.py)
+    assert doc["cells"]["press_button"]["mem0"] == {
+        "conditions": unstated_conditions("mem0"), "successes": 36, "dataset": "rmbench/2",
+        "command": "rmbench table ..."}
+    assert unstated_conditions("mem0:gt_classifier")["train"] == []  # Mem-0's checkpoint
     assert doc["cells"]["press_button"]["dp"] == {"successes": 2}  # untouched
     assert doc["superseded"] == [{"why": "format 1", "cells": {"press_button": {"mem0": {"successes": 2}}}}]
 

@@ -8,6 +8,7 @@ comparison of two cells carries the interval of their difference.
   informative at 0/100 and 100/100, where the normal approximation collapses to a point).
 - ``difference``: Newcombe's hybrid score interval (method 10) for the difference of two
   independent rates, built from the two Wilson intervals.
+- ``format_difference``: a difference and its interval in points, as the docs print them.
 """
 
 from __future__ import annotations
@@ -54,3 +55,16 @@ def format_rate(successes: int, n: int) -> str:
     """'20 [13, 29]': the rate and its 95% interval in percent, as the docs print them."""
     low, high = wilson(successes, n)
     return f"{100 * successes / n:.0f} [{100 * low:.0f}, {100 * high:.0f}]"
+
+
+def signed(points: float, digits: int = 0) -> str:
+    """'+5', '-18', '0': ``points`` rounded to ``digits`` decimals with its sign, and without
+    one where it rounds to zero ("-0" would put a zero on one side of it)."""
+    text = f"{points:+.{digits}f}"
+    return text[1:] if float(text) == 0 else text
+
+
+def format_difference(d: float, low: float, high: float, digits: int = 0) -> str:
+    """'+66 [+54, +75]', '-9 [-18, 0]': a difference of two rates and its 95% interval, given
+    as fractions, in points."""
+    return f"{signed(100 * d, digits)} [{signed(100 * low, digits)}, {signed(100 * high, digits)}]"

@@ -1,7 +1,8 @@
 """``rmbench report``: evaluation folders side by side, as in the benchmark's published table.
 
 Rows are tasks grouped M(1) then M(n), with group and overall averages; columns are the
-evaluated policies (each folder's summary.json), and optionally the published success rates.
+evaluated policies (each folder's summary.json), and optionally the published success rates
+(the paper's main results table, ``suite/published.json``).
 Markdown, or HTML with bar charts and links to the videos. Every success rate carries its
 Wilson 95% interval (``eval/intervals.py``): a published one too, over its 100 rollouts; an
 average over tasks of equal episode counts, the interval of the pooled episodes (wider than
@@ -18,28 +19,18 @@ from pathlib import Path
 from rmbench.eval.chance import chance
 from rmbench.eval.harness import drop_text, rate_text, read_records
 from rmbench.eval.intervals import wilson
+from rmbench.suite import published as _published
 from rmbench.tasks.registry import ordered
 from rmbench.video import write_atomic
 
-# Success rates (%) published for the benchmark (100 rollouts, 50 demonstrations per task).
-PUBLISHED_ROLLOUTS = 100
-PUBLISHED = {
-    "DP": {"observe_and_pickup": 1, "rearrange_blocks": 0, "put_back_block": 0, "swap_blocks": 11,
-           "swap_T": 20, "battery_try": 10, "blocks_ranking_try": 10, "cover_blocks": 0,
-           "press_button": 0},
-    "ACT": {"observe_and_pickup": 1, "rearrange_blocks": 29, "put_back_block": 0, "swap_blocks": 2,
-            "swap_T": 2, "battery_try": 19, "blocks_ranking_try": 0, "cover_blocks": 0,
-            "press_button": 0},
-    "Pi0.5": {"observe_and_pickup": 9, "rearrange_blocks": 13, "put_back_block": 11,
-              "swap_blocks": 24, "swap_T": 15, "battery_try": 16, "blocks_ranking_try": 6,
-              "cover_blocks": 0, "press_button": 0},
-    "X-VLA": {"observe_and_pickup": 9, "rearrange_blocks": 13, "put_back_block": 18,
-              "swap_blocks": 16, "swap_T": 3, "battery_try": 26, "blocks_ranking_try": 1,
-              "cover_blocks": 2, "press_button": 0},
-    "Mem-0": {"observe_and_pickup": 4, "rearrange_blocks": 89, "put_back_block": 90,
-              "swap_blocks": 67, "swap_T": 14, "battery_try": 28, "blocks_ranking_try": 18,
-              "cover_blocks": 68, "press_button": 0},
-}
+# Success rates (%) of the paper's main results table, per policy and task (suite/published.py)
+PUBLISHED_ROLLOUTS = _published.rollouts()
+PUBLISHED = _published.columns("main")
+
+
+def published_source(table: str = "main") -> str:
+    """The paper and table published columns come from: '2603.01229, main results table'."""
+    return f"{_published.arxiv()}, {_published.table_name(table)} table"
 
 
 class Rate(float):
@@ -93,15 +84,19 @@ def load_runs(folders: list[str | Path], labels: list[str] | None = None) -> lis
 
 
 def table(runs: list[dict], published: list[str], metric: str = "success_rate",
-          tasks: list[str] | None = None, with_chance: bool = False, intervals: bool = False
-          ) -> tuple[list[str], list[list]]:
+          tasks: list[str] | None = None, with_chance: bool = False, intervals: bool = False,
+          published_table: str = "main") -> tuple[list[str], list[list]]:
     """Header and rows: task, TMC, one value (%) of ``metric`` (success_rate or mean_progress)
     per column; None where not evaluated. Published numbers exist for success rates only, and
     so does the last column ``with_chance`` adds: the task's chance level for a policy
     without memory (``eval/chance.py``). ``tasks`` keeps only those rows (default: all nine).
-    ``intervals``: success rates are ``Rate``s (floats with their count and interval)."""
+    ``intervals``: success rates are ``Rate``s (floats with their count and interval).
+    ``published`` names columns of the paper's ``published_table`` (``main``, ``ablations``:
+    ``suite/published.py``); None where it gives a column no number for a task, and its
+    average where the paper states one."""
     intervals = intervals and metric == "success_rate"
     published = published if metric == "success_rate" else []
+    rates = _published.columns(published_table)
     with_chance = with_chance and metric == "success_rate"
     header = (["task", "TMC"] + [r["name"] for r in runs] + [f"{p} (published)" for p in published]
               + ["chance (no memory)"] * with_chance)
@@ -115,16 +110,25 @@ def table(runs: list[dict], published: list[str], metric: str = "success_rate",
             if intervals:
                 vals = [Rate.of(r["summary"]["tasks"][t]) if t in r["summary"]["tasks"]
                         else None for r in runs]
-                vals += [Rate(PUBLISHED[p][t], PUBLISHED_ROLLOUTS) for p in published]
+                vals += [Rate(rates[p][t], PUBLISHED_ROLLOUTS) if t in rates[p] else None
+                         for p in published]
             else:
                 vals = [100 * r["summary"]["tasks"][t][metric] if t in r["summary"]["tasks"]
-                        else None for r in runs] + [PUBLISHED[p][t] for p in published]
+                        else None for r in runs] + [rates[p].get(t) for p in published]
             vals += [100 * chance(t).rate] * with_chance
             group_rows.append([t, group, *vals])
         rows.extend(group_rows)
         rows.append([f"average {group}", group, *_averages(group_rows)])
     task_rows = [r for r in rows if not str(r[0]).startswith("average")]
     rows.append(["average (all)", "", *_averages(task_rows)])
+    # an average the paper states (over all of a group's tasks) reads as it states it: 25.25
+    # reads its 25.3, not 25.2; one that reads the same keeps its interval
+    averages = [r for r in rows if str(r[0]).startswith("average")]
+    for row in averages if len(task_rows) == len(ordered()) else []:
+        for k, p in enumerate(published):
+            given = _published.stated(published_table, p, row[1])
+            if given is not None and f"{row[2 + len(runs) + k]:.1f}" != f"{given:.1f}":
+                row[2 + len(runs) + k] = given
     return header, rows
 
 
@@ -164,6 +168,8 @@ def markdown(runs: list[dict], published: list[str]) -> str:
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     lines += probe_markdown(runs)
+    if published:
+        lines += [f"Published: arXiv {published_source()}.", ""]
     lines += ["Runs: " + ", ".join(
         f"{r['name']}: `{r['policy']}` ({r['folder']})" if r["name"] != r["policy"]
         else f"`{r['name']}` ({r['folder']})" for r in runs), ""]

@@ -2,7 +2,16 @@
 ``table.json`` without its local folders, plus what the evaluation's records and the
 checkpoint say about the policy's subtask ends (``rmbench boundaries``) and its planner.
 A cell pooled over training seeds keeps each seed's record under ``seeds``. An ``rmbench
-eval`` folder of one checkpoint gives such rows too (``evaluation_rows``)."""
+eval`` folder of one checkpoint gives such rows too (``evaluation_rows``).
+
+A record's ``conditions`` say what its walls were measured under, as fields: per stage
+(``train``, ``eval``) a list of pieces, one per machine or run a training went through, in
+step order. A piece: ``machine`` (a key of the results' ``machines``), ``steps`` ([from, to]
+of a training run in pieces), ``wall_s`` (the piece's own wall, where kept), ``threads``
+(torch threads) or ``workers`` (evaluation workers), ``jobs_beside`` (other jobs sharing the
+machine, 0 alone) and ``beside`` (what they were), ``includes`` (other work the wall holds)
+and a ``note``; null where the record does not say, and the results' ``wall_defaults`` hold
+then."""
 
 from __future__ import annotations
 
@@ -20,6 +29,18 @@ from rmbench.suite.stages import TIMING, result_row
 KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",
         "failure_reasons", "train_wall_s", "train_wall_from_step", "eval_wall_s", "machines",
         "memory", "gym_id", "planner_refit")
+
+
+TRAIN_CONDITIONS = ("machine", "steps", "wall_s", "threads", "jobs_beside", "beside", "includes",
+                    "note")
+EVAL_CONDITIONS = ("machine", "workers", "jobs_beside", "beside", "includes", "note")
+
+
+def unstated_conditions(spec: str) -> dict[str, list[dict[str, None]]]:
+    """The ``conditions`` of a record that states none: one piece per stage, every field null
+    (no training piece for ``gt_classifier``, which evaluates Mem-0's checkpoint)."""
+    train = [] if spec.startswith("mem0:gt_classifier") else [dict.fromkeys(TRAIN_CONDITIONS)]
+    return {"train": train, "eval": [dict.fromkeys(EVAL_CONDITIONS)]}
 
 
 def seed_records(cell: dict[str, Any]) -> dict[str, dict[str, Any]]:

@@ -1,11 +1,12 @@
 """A table's results: ``table.json`` (every cell's row, the plan, wall times, the machine) and
-``table.md``, the benchmark's two tables (policies beside the published ones, Mem-0's
-ablations beside the published averages) with M(1) and M(n) groups and averages. A cell not
-evaluated yet reads "—" and keeps its group's average empty. Every success rate carries its
-Wilson 95% interval (``success_ci95`` in each cell of table.json, "[low, high]" in table.md);
-a column trained with several seeds is one cell, their episodes pooled, each seed's row in it
-and Mem-0 against each other column of its row carries the difference's (``differences``):
-whether two cells differ by more than the episodes' noise."""
+``table.md``, the benchmark's two tables (policies beside the paper's main results table,
+Mem-0's ablations beside its ablations table, task by task: ``published.py``) with M(1) and
+M(n) groups and averages. A cell not evaluated yet reads "—" and keeps its group's average
+empty. Every success rate carries its Wilson 95% interval (``success_ci95`` in each cell of
+table.json, "[low, high]" in table.md); a column trained with several seeds is one cell,
+their episodes pooled, each seed's row in it and Mem-0 against each other column of its row
+carries the difference's (``differences``): whether two cells differ by more than the
+episodes' noise."""
 
 from __future__ import annotations
 
@@ -15,10 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.eval.chance import chance
-from rmbench.eval.intervals import difference, outside_noise
-from rmbench.eval.report import PUBLISHED, Rate, format_cell, table
+from rmbench.eval.intervals import difference, format_difference, outside_noise
+from rmbench.eval.report import PUBLISHED, Rate, format_cell, published_source, table
 from rmbench.machine import describe, short
 from rmbench.suite.plan import Plan, applies, split_seed
+from rmbench.suite.published import ablation_names
 from rmbench.suite.runner import column
 from rmbench.suite.stages import TIMING, cell_row, pooled_row, read_json
 from rmbench.tasks import get_task
@@ -27,10 +29,6 @@ from rmbench.video import write_atomic
 POLICY_TABLE = ("mem0", "mem0:no_memory", "dp", "act")
 ABLATION_TABLE = ("mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
                   "mem0:gt_classifier")
-# Published Mem-0 ablation averages (%), by group (../MEM0.md: per-task numbers unpublished)
-PUBLISHED_ABLATIONS = {"M(1)": {"mem0": 52.8, "mem0:no_anchor": 26.8, "mem0:no_sliding": 40.4},
-                       "M(n)": {"mem0": 28.5, "mem0:no_key": 4.8, "mem0:no_anchor": 26.8,
-                                "mem0:no_sliding": 25.3, "mem0:gt_classifier": 45.3}}
 
 
 def results(plan: Plan, out: Path, command: str = "",
@@ -81,14 +79,17 @@ def _columns(res: dict[str, Any], specs: tuple[str, ...] | None = None) -> list[
 
 
 def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] = (),
-                    metric: str = "success_rate", intervals: bool = False) -> list[str]:
+                    metric: str = "success_rate", intervals: bool = False,
+                    published_table: str = "main") -> list[str]:
     """``eval.report.table`` over the plan's tasks, one column per spec: "—" where a cell is
     not evaluated yet, "n/a" where the column has no cell (no_key on an M(1) task, and so in
-    the average over both groups). ``intervals``: each success rate "value [low, high]"."""
+    the average over both groups) or the paper gives no number. ``intervals``: each success rate
+    "value [low, high]". ``published``: columns of the paper's ``published_table`` after the
+    specs'."""
     runs = [{"name": column(s), "summary": {"tasks": {t: row[s] for t, row in res["cells"].items()
                                                       if row.get(s)}}} for s in specs]
     header, rows = table(runs, list(published), metric, list(res["cells"]), with_chance=True,
-                         intervals=intervals)
+                         intervals=intervals, published_table=published_table)
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     groups = {r[1] for r in rows if r[1]}
     for r in rows:
@@ -97,17 +98,20 @@ def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] 
         for k, v in enumerate(r[2:]):
             # the overall average spans every group listed: a column absent from one has none
             scope = [r[1]] if r[1] else groups
-            absent = k < len(specs) and not all(applies(specs[k], g) for g in scope)
+            absent = (not all(applies(specs[k], g) for g in scope) if k < len(specs)
+                      else v is None)  # a published column: no number for the task
             values.append("n/a" if absent else format_cell(v))
         lines.append("| " + " | ".join([name, r[1], *values]) + " |")
     return lines
 
 
 def difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0",
-                     labels: dict[str, str] | None = None) -> list[str]:
+                     labels: dict[str, str] | None = None,
+                     apart: dict[str, dict[str, str]] | None = None) -> list[str]:
     """Per task, ``base`` minus each column in points with the difference's 95% interval;
     "*" where the interval excludes zero, "—" where either cell is missing. ``labels``: a
-    task's name in the table, where it is not the task's own."""
+    task's name in the table, where it is not the task's own; ``apart``: per task and column,
+    what a cell left out of the comparison reads instead of "—"."""
     others = [s for s in specs if s != base]
     lines = ["| task | TMC | " + " | ".join(f"{column(base)} − {column(s)}" for s in others)
              + " |", "|---|---|" + "---|" * len(others)]
@@ -118,10 +122,10 @@ def difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0",
             if not applies(s, get_task(task).tmc):
                 values.append("n/a")
             elif s not in diffs:
-                values.append("—")
+                values.append((apart or {}).get(task, {}).get(s, "—"))
             else:
                 d, (low, high) = diffs[s]["difference"], diffs[s]["ci95"]
-                values.append(f"{100 * d:+.0f} [{100 * low:+.0f}, {100 * high:+.0f}]"
+                values.append(format_difference(d, low, high)
                               + ("*" if diffs[s]["outside_noise"] else ""))
         label = (labels or {}).get(task, task)
         lines.append(f"| {label} | {get_task(task).tmc} | " + " | ".join(values) + " |")
@@ -139,18 +143,19 @@ def markdown(res: dict[str, Any], intervals: bool = True) -> str:
     specs = _columns(res, POLICY_TABLE)
     if specs:
         lines += _markdown_table(res, specs, list(PUBLISHED), intervals=intervals) + [""]
+        lines += [f"Published: arXiv {published_source()}.", ""]
     specs = _columns(res, ABLATION_TABLE)
     if specs:
         lines += [f"## Mem-0's ablations (success rate, %{ci})", ""]
-        lines += _markdown_table(res, specs, intervals=intervals) + [""]
+        names = ablation_names()
+        lines += _markdown_table(res, specs, [names[s] for s in specs if s in names],
+                                 intervals=intervals, published_table="ablations") + [""]
+        lines += [f"Published: arXiv {published_source('ablations')}.", ""]
         if intervals and "mem0" in specs and len(specs) > 1:
             lines += ["Mem-0 minus each ablation (points) [95% interval of the difference, "
                       "Newcombe's]; * where it excludes zero, the difference outside the "
                       "episodes' noise:", ""]
             lines += difference_table(res, specs) + [""]
-        lines += ["Published averages: " + "; ".join(
-            f"{group}: " + ", ".join(f"{column(s)} {v}" for s, v in vals.items())
-            for group, vals in PUBLISHED_ABLATIONS.items()) + ".", ""]
     lines += ["Chance (no memory): the best success rate of a policy with every skill and no "
               "memory, which guesses where only the past would tell (`eval/chance.py`):", ""]
     lines += [f"- {t}: {100 * c['rate']:.1f}%, {c['basis']}" for t, c in res["chance"].items()]
