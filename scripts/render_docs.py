@@ -25,12 +25,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 from rmbench.data.layout import FORMAT
+from rmbench.eval import published as paper
 from rmbench.eval.chance import chance
-from rmbench.eval.intervals import format_rate
-from rmbench.eval.report import PUBLISHED, Rate
+from rmbench.eval.intervals import format_difference, format_rate
+from rmbench.eval.report import PUBLISHED, Rate, published_source
 from rmbench.suite.plan import applies
 from rmbench.suite.records import seed_records
-from rmbench.suite.tables import PUBLISHED_ABLATIONS, difference_table, differences
+from rmbench.suite.tables import difference_table, differences
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered, recorded_gym_id
 from rmbench.video import write_atomic
@@ -118,15 +119,16 @@ def _older(task: str, spec: str, cell: dict | None) -> str:
 
 def _footnote(table: str, lead: str = "", marks: str | None = None) -> str:
     """The notes under a table for the marks it holds, or for ``marks`` with ``lead`` (how a
-    table that leaves such cells out says so, instead of the marks)."""
+    table that leaves such cells out says so, instead of the marks: its ``{mark}`` the one a
+    left-out cell carries)."""
     marks = ("†" if "†" in table else "") + ("‡" if "‡" in table else "") if marks is None else marks
     notes = []
     if "†" in marks:
-        notes.append(f"{lead or '†'} trained on datasets older than format `{FORMAT}`, where a "
-                     "subtask repeated back to back was one subtask (CHANGELOG.md, 2026-11-27); "
-                     "not re-run on the current data yet.")
+        notes.append(f"{lead.format(mark='†') if lead else '†'} trained on datasets older than "
+                     f"format `{FORMAT}`, where a subtask repeated back to back was one subtask "
+                     "(CHANGELOG.md, 2026-11-27); not re-run on the current data yet.")
     if "‡" in marks:
-        notes.append(f"{lead + ' run' if lead else '‡'} on an earlier version of the task "
+        notes.append(f"{lead.format(mark='‡') + ' run' if lead else '‡'} on an earlier version of the task "
                      "(CHANGELOG.md, 2026-11-28: battery_try-v1 counted a try while the arm "
                      "that made it was still over the holder); not re-run on the current "
                      "version yet.")
@@ -158,8 +160,7 @@ def _chance_avg(res: dict, group: str) -> list[str]:
 
 
 def _published_avg(policy: str, group: str) -> str:
-    tasks = [t.name for t in ordered() if not group or t.tmc == group]
-    return f"{sum(PUBLISHED[policy][t] for t in tasks) / len(tasks):.1f}"
+    return f"{paper.average('main', policy, group):.1f}"
 
 
 def readme_results() -> str:
@@ -170,7 +171,7 @@ def readme_results() -> str:
                        lambda t: _chance(res, t) + [f"{PUBLISHED['Mem-0'][t]:g}"],
                        lambda g: _chance_avg(res, g) + [_published_avg("Mem-0", g)])
     table = markdown(header, rows)
-    return table + _footnote(table)
+    return table + _published_line() + _footnote(table)
 
 
 def state_policies() -> str:
@@ -183,7 +184,28 @@ def state_policies() -> str:
                        lambda t: [f"{PUBLISHED[p][t]:g}" for p in published] + _chance(res, t),
                        lambda g: [_published_avg(p, g) for p in published] + _chance_avg(res, g))
     table = markdown(header, rows)
-    return table + _footnote(table)
+    return table + _published_line() + _footnote(table)
+
+
+def _beside_published(rows: list[list[str]], specs: list[str]) -> list[list[str]]:
+    """``rows`` (``_state_rows``') with the paper's ablations table beside each measured
+    cell, in parentheses: its rate for the task, or its average for the group (as it
+    states it, else the mean of its tasks)."""
+    names = paper.ablation_names()
+    out = []
+    for row in rows:
+        task = row[0].strip("*")
+        group = row[1] if task.startswith("average") else None
+        row = list(row)
+        for k, spec in enumerate(specs):
+            if spec not in names or row[2 + k] == "n/a":
+                continue
+            value = (paper.average("ablations", names[spec], group) if group is not None
+                     else paper.columns("ablations")[names[spec]].get(task))
+            if value is not None:
+                row[2 + k] += f" ({value:.1f})" if group is not None else f" ({value:g})"
+        out.append(row)
+    return out
 
 
 def state_ablations() -> str:
@@ -192,11 +214,22 @@ def state_ablations() -> str:
              "mem0:gt_classifier"]
     header = ["task", "TMC", *(COLUMN[s] for s in specs), "chance"]
     rows = _state_rows(res, specs, lambda t: _chance(res, t), lambda g: _chance_avg(res, g))
-    published = "; ".join(f"{g}: " + ", ".join(f"{COLUMN[s]} {v:g}" for s, v in vals.items())
-                          for g, vals in PUBLISHED_ABLATIONS.items())
-    table = markdown(header, rows)
-    return (table + _footnote(table)
-            + f"\nPublished averages (per-task numbers unpublished): {published}.\n")
+    names = paper.ablation_names()
+    table = markdown(header, _beside_published(rows, specs))
+    ours = [s for s in specs if s in names and s != "mem0"]
+    return (table + f"\nIn parentheses: the paper's rate (arXiv {published_source('ablations')}; "
+            f"{paper.rollouts()} rollouts each), where {_and([COLUMN[s] for s in ours])} are its "
+            f"{_and([names[s] for s in ours])} ({COLUMN['mem0:no_memory']} is not in it); an "
+            "average is the paper's where it states one, else the mean of its tasks.\n"
+            + _footnote(table))
+
+
+def _and(words: list[str]) -> str:
+    return ", ".join(words[:-1]) + " and " + words[-1] if len(words) > 1 else "".join(words)
+
+
+def _published_line() -> str:
+    return f"\nPublished: arXiv {published_source()} ({paper.rollouts()} rollouts each).\n"
 
 
 def state_differences() -> str:
@@ -205,20 +238,25 @@ def state_differences() -> str:
     res = load("table_state.json")
     specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
              "mem0:gt_classifier"]
-    # a difference only between cells measured on the same data format and task version
-    cells, left_out = {}, set()
+    # a difference only between cells measured on the same data format and task version; a
+    # pair kept apart reads "—" with the marks that kept it apart
+    cells, apart = {}, {}
     for t, row in res["cells"].items():
-        base = _older(t, "mem0", row["mem0"])
-        cells[t] = {s: c for s, c in row.items() if _older(t, s, c) == base}
-        for c_mark in (_older(t, s, c) for s, c in row.items()):
-            left_out |= set(c_mark.strip()) ^ set(base.strip())  # what kept a pair apart
+        base = set(_older(t, "mem0", row["mem0"]).strip())
+        cells[t] = {s: c for s, c in row.items() if set(_older(t, s, c).strip()) == base}
+        for s, c in row.items():
+            marks = "".join(sorted(set(_older(t, s, c).strip()) ^ base))
+            if marks:
+                apart.setdefault(t, {})[s] = f"— {marks}"
+    left_out = "".join(sorted({m for row in apart.values() for v in row.values() for m in v[2:]}))
     # a row measured on an earlier task version says so
     labels = {t: f"{t} ‡" for t, row in res["cells"].items() if "‡" in _older(t, "mem0", row["mem0"])}
     lines = difference_table({"cells": cells, "differences": differences(cells)}, specs,
-                             labels=labels)
+                             labels=labels, apart=apart)
     text = "\n".join(lines) + "\n"
-    return (text + _footnote(text, "— where one of the two cells is", "".join(sorted(left_out)))
-            + _footnote(text, marks="‡" if "‡" in text else ""))
+    labelled = "‡" if any("‡" in label for label in labels.values()) else ""
+    return (text + _footnote(text, "— {mark} where one of the two cells is", left_out)
+            + _footnote(text, marks=labelled))
 
 
 def state_seeds() -> str:
@@ -271,26 +309,80 @@ def memory_probe() -> str:
     for path in sorted(RESULTS.glob("memory_probe_*.json")):
         r = json.loads(path.read_text())
         ref, d = r["reference"], r["with_minus_reference"]
-        drop = (f"{100 * r['drop']:+.0f} [{100 * r['drop_ci95'][0]:+.0f}, "
-                f"{100 * r['drop_ci95'][1]:+.0f}]")
+        drop = format_difference(r["drop"], *r["drop_ci95"])
         rows.append([r["task"], r["probe"], rate(r["without"] | {"episodes": r["episodes"]}),
                      rate(r["with"] | {"episodes": r["episodes"]}), drop,
                      f"{COLUMN.get(ref['cell'], ref['cell'])} {rate(ref)}",
-                     f"{100 * d['difference']:+.0f} [{100 * d['ci95'][0]:+.0f}, "
-                     f"{100 * d['ci95'][1]:+.0f}]", f"`{path.name}`"])
+                     format_difference(d["difference"], *d["ci95"]), f"`{path.name}`"])
     return markdown(["task", "reset at", "without", "with", "drop", "memoryless control",
                      "with − control", "results"], rows)
 
 
-def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
+def _conditions(piece: dict) -> list[str]:
+    """What a wall's piece was measured under, as its record keeps it (``conditions``): the
+    torch threads or workers, the jobs beside it, what else the wall holds, a note."""
+    out = []
+    if piece.get("threads") is not None:
+        out.append(_plural(piece["threads"], "torch thread"))
+    if piece.get("workers") is not None:
+        out.append(_plural(piece["workers"], "worker"))
+    if piece.get("jobs_beside") == 0:
+        out.append("alone")
+    elif piece.get("beside"):
+        out.append(f"beside {piece['beside']}")
+    elif piece.get("jobs_beside"):
+        out.append(f"beside {_plural(piece['jobs_beside'], 'other job')}")
+    if piece.get("includes"):
+        out.append(f"including {piece['includes']}")
+    if piece.get("note"):
+        out.append(piece["note"])
+    return out
+
+
+def _wall(cell: dict, stage: str, machines: dict[str, dict]) -> str:
+    """A training's or evaluation's wall with its conditions (``conditions`` of the record):
+    '43.5 min (2 torch threads, beside ...)'; a training run in pieces (another machine,
+    another run) piece by piece, each to the step it reached, with its own wall where kept.
+    A machine is named where it is not the page's one (``machines``' first) or the wall has
+    pieces on several."""
+    total = cell.get(f"{stage}_wall_s")
+    pieces = cell.get("conditions", {}).get(stage) or [{}]
+    default = next(iter(machines), None)
+    several = len({p.get("machine") for p in pieces}) > 1
+
+    def where(p: dict) -> list[str]:
+        m = p.get("machine")
+        return [f"on {machines[m]['label']}"] if m and (several or m != default) else []
+
+    if len(pieces) == 1:
+        conds = _conditions(pieces[0])
+        return " ".join([minutes(total), *where(pieces[0])]) + (f" ({', '.join(conds)})" if conds else "")
+    start = cell.get(f"{stage}_wall_from_step") or 0
+    parts = []
+    for p in pieces:
+        # a piece before the step the wall is timed from: its wall was not kept
+        conds = _conditions(p) + (["not timed"] if p["steps"][1] <= start else [])
+        words = ([minutes(p["wall_s"])] if p.get("wall_s") is not None else []) + where(p)
+        parts.append(" ".join([*words, f"to step {p['steps'][1]:,}"])
+                     + (f" ({', '.join(conds)})" if conds else ""))
+    return (minutes(total) + (f" from step {start:,}" if start else "") + ": " + "; ".join(parts))
+
+
+def _record_rows(cells: dict[str, dict[str, dict]], machines: dict[str, dict] | None = None
+                 ) -> list[list[str]]:
+    machines = load("table_state.json")["machines"] if machines is None else machines
     rows = []
     for task in ordered():
         for spec, c in cells.get(task.name, {}).items():
             rec = c.get("record", {})
             progress = f"{c['mean_progress']:.3f}" + (f" ({rec['progress']})" if "progress" in rec else "")
             endings = ", ".join(f"{k} {v}" for k, v in c["endings"].items() if v)
-            # a cell pooled over training seeds: each seed's success and walls (a seed's
-            # hand-written record, where it has one, says how its wall was kept)
+            # a cell pooled over training seeds: each seed's success and walls, each with the
+            # conditions its record keeps
             seeds = seed_records(c)
             named = len(seeds) > 1
             success = f"{c['successes']}/{c['episodes']}" + (
@@ -298,24 +390,24 @@ def _record_rows(cells: dict[str, dict[str, dict]]) -> list[list[str]]:
                 if named else "")
             train = ("(Mem-0's checkpoint)" if spec == "mem0:gt_classifier" and not named
                      else "(Mem-0's checkpoints)" if spec == "mem0:gt_classifier"
-                     else " + ".join(_train_wall(r, s, named) for s, r in seeds.items()))
+                     else " + ".join(_train_wall(r, s, named, machines) for s, r in seeds.items()))
             failures = rec.get("failures") or "; ".join(
                 f"{why} {n}" for why, n in list(c["failure_reasons"].items())[:4])
-            evals = " + ".join(_seed_wall(r, "eval", s, named) for s, r in seeds.items())
+            evals = " + ".join(_seed_wall(r, "eval", s, named, machines) for s, r in seeds.items())
             rows.append([task.name, f"`{spec}`", success, progress, endings,
                          failures, train, evals])
     return rows
 
 
-def _seed_wall(cell: dict, stage: str, seed: str, named: bool) -> str:
-    """One seed's training or evaluation wall: its record's words where it has them."""
-    wall = cell.get("record", {}).get(f"{stage}_wall") or minutes(cell[f"{stage}_wall_s"])
+def _seed_wall(cell: dict, stage: str, seed: str, named: bool, machines: dict[str, dict]) -> str:
+    """One seed's training or evaluation wall with its conditions."""
+    wall = _wall(cell, stage, machines)
     return f"{wall} (seed {seed})" if named else wall
 
 
-def _train_wall(cell: dict, seed: str, named: bool) -> str:
+def _train_wall(cell: dict, seed: str, named: bool, machines: dict[str, dict]) -> str:
     """One training's wall; a planner refit's is its executor's, the refit said so."""
-    wall = _seed_wall(cell, "train", seed, False)
+    wall = _seed_wall(cell, "train", seed, False, machines)
     if "planner_refit" in cell:
         wall += " (the executor), then its planner refit (`benchmarks/planner_refit.py`)"
     return f"{wall} (seed {seed})" if named else wall
@@ -329,12 +421,33 @@ def state_records() -> str:
     return markdown(RECORD_HEADER, _record_rows(load("table_state.json")["cells"]))
 
 
+def state_hardware() -> str:
+    """The machines the records' walls name, and the conditions a wall was measured under
+    where its record names none (``machines`` and ``wall_defaults`` of the results)."""
+    res = load("table_state.json")
+    machines, defaults = res["machines"], res["wall_defaults"]
+
+    def what(m: dict) -> str:
+        kind = (f"an {m['gpu']} GPU" if m["gpu"] else
+                f"an {m['cpu']} machine with {m['cores']} CPU cores")
+        return kind + (f" ({m['about']})" if m.get("about") else "")
+
+    train, evals = defaults["train"], defaults["eval"]
+    return ("Machines: " + "; ".join(f"**{m['label']}**, {what(m)}" for m in machines.values())
+            + f". Every stage (collection, training, evaluation) ran on "
+            f"{machines[train['machine']]['label']}, {defaults['jobs']} jobs at a time, unless "
+            f"its record says otherwise: a training with {_plural(train['threads'], 'torch thread')}"
+            f" beside {_plural(train['jobs_beside'], 'other job')}, an evaluation with "
+            f"{_plural(evals['workers'], 'worker')}.\n")
+
+
 def state_superseded() -> str:
     """The cells a re-run replaced, each group under why it no longer stands."""
+    res = load("table_state.json")
     out = []
-    for group in load("table_state.json")["superseded"]:
+    for group in res["superseded"]:
         out.append(f"{group['why'][0].upper()}{group['why'][1:]}:\n\n"
-                   + markdown(RECORD_HEADER, _record_rows(group["cells"])))
+                   + markdown(RECORD_HEADER, _record_rows(group["cells"], res["machines"])))
     return "\n".join(out)
 
 
@@ -519,6 +632,9 @@ def aliasing() -> str:
 def speed() -> str:
     sim, collect = load("sim_speed.json"), load("collect_speed.json")
     ev, pol = load("eval_speed.json"), load("policy_speed.json")
+    train, ab = load("train_speed.json"), load("eval_ab_speed.json")
+    smoke = next(r for r in ev["rows"] if "video" in r["run"])
+    round_ = next(r for r in ev["rows"] if "each task" in r["run"])
     cams = f"{len(sim['cameras'])} cameras {sim['resolution']}"
     two = next(r for r in collect["rows"] if r["workers"] == 2)
     one = next(r for r in collect["rows"] if r["workers"] == 1 and "search" in r["run"])
@@ -540,12 +656,30 @@ def speed() -> str:
          f"{one['mb_per_demo']:.2f} MB ({one['frames_per_demo']:.0f} frames)", "same run"],
         ["evaluation harness vs bare env, `noop` policy", f"{ev['harness_vs_bare']:.2f}x",
          "`benchmarks/eval_speed.py`"],
+        ["one `noop` episode with its video (the first evaluation's default)",
+         f"{smoke['wall_s']:.1f} s ({smoke['steps']} steps)", "same run"],
+        ["a round of the nine tasks, `noop` (every episode to its step limit), 1 worker",
+         f"{round_['wall_s']:.0f} s ({round_['steps']:,} steps)", "same run"],
         [f"closed loop, {pol['inference_threads']} thread, {len(pol['cameras'])} cameras, Hz",
          f"Mem-0 {p['mem0']['hz']} (planner {p['mem0']['planner_ms']} ms), DP {p['dp']['hz']}, "
          f"ACT {p['act']['hz']}", "`benchmarks/policy_speed.py`"],
         [f"training steps/s, {pol['training_threads']} threads, batch {pol['batch_size']}",
          f"Mem-0 {p['mem0']['train_steps_per_s']}, DP {p['dp']['train_steps_per_s']}, "
          f"ACT {p['act']['train_steps_per_s']}", "same run"],
+        [f"Mem-0 training step on {train['task']}, the state recipe, batch {train['batch']}, "
+         f"1 thread: this tree against {train['base']['commit'][:7]}",
+         f"{min(train['this']['cpu_ms_per_step']):.0f} ms of CPU against "
+         f"{min(train['base']['cpu_ms_per_step']):.0f} ({train['speedup']:.2f}x); loss curves "
+         + ("identical" if train["curves"]["identical"] else "differ"),
+         "`benchmarks/train_speed.py`"],
+        [f"a {ab['episodes']}-episode evaluation of a state Mem-0 on {ab['task']} (the state "
+         f"recipe, {ab['checkpoint']['step']:,} steps), 1 worker: batch {ab['this']['batch']} "
+         f"against one episode at a time ({ab['base']['commit'][:7]})",
+         f"{min(ab['this']['cpu_s']):.1f} s of CPU against {min(ab['base']['cpu_s']):.1f} "
+         f"({ab['cpu_ratio']:.2f}x less): {ab['this']['cpu_ms_per_step']:.1f} and "
+         f"{ab['base']['cpu_ms_per_step']:.1f} ms a step, of which the env and harness alone "
+         f"(`noop`) {ab['env_only']['cpu_ms_per_step']:.1f}; success {ab['this']['success']} "
+         f"and {ab['base']['success']} of {ab['episodes']}", "`benchmarks/eval_ab_speed.py`"],
     ]
     return markdown(["what", "figure", "command"], rows)
 
@@ -588,7 +722,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,
-    "state-records": state_records,
+    "state-records": state_records, "state-hardware": state_hardware,
     "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,
     "learning-state": learning_state, "learning-state-more": learning_state_more,
     "learning-pixels": learning_pixels, "robustness": robustness,

@@ -19,6 +19,7 @@ from rmbench.policies.dp.agent import DPPolicy, train_dp
 from rmbench.policies.dp.config import DPConfig
 from rmbench.policies.nn.diffusion import DDPMSchedule
 from rmbench.policies.nn.unet1d import ConditionalUnet1D
+from rmbench.policies.registry import env_options, policy_cameras
 from rmbench.training.loop import TrainConfig
 from tests.conftest import EXPORTED, keep_exports, roll_out
 
@@ -91,6 +92,15 @@ def test_random_frame_stream_resumes_anywhere(dataset):
     assert all(0 <= i < len(frames) for b in head for i in b)
 
 
+def ensembled(policy, chunks) -> list[float]:
+    """The first entry of the action an episode's steps 0..5 take, given each step's chunk."""
+    slot, out = policy.slots[0], []
+    for t in range(6):
+        slot.t = t
+        out.append(policy.take(slot, next(chunks))[0])
+    return out
+
+
 def test_temporal_ensembling_weights_the_oldest_prediction_most():
     torch.manual_seed(0)
     from rmbench.policies.act.modeling import ACTModel
@@ -98,14 +108,13 @@ def test_temporal_ensembling_weights_the_oldest_prediction_most():
     cfg = replace(TINY_ACT, horizon=4, temporal_ensemble=0.5)
     policy = ACTPolicy.from_model(ACTModel(cfg))
     chunks = iter([np.full((4, 14), v) for v in (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)])
-    policy.chunk = lambda state: next(chunks)
-    out = [policy.schedule(None)[0] for policy.t in range(6)]
+    out = ensembled(policy, chunks)
     w = np.exp(-0.5 * np.arange(4))
     assert out[0] == 1.0
     assert out[1] == pytest.approx((w[:2] @ [1, 2]) / w[:2].sum())
     # at step 5 the chunks of steps 2..5 cover it (step 1's has run out)
     assert out[5] == pytest.approx((w @ [3, 4, 5, 6]) / w.sum())
-    assert len(policy.ensemble.chunks) == 4
+    assert len(policy.slots[0].ensemble.chunks) == 4
 
 
 def test_an_ensemble_window_averages_only_the_latest_chunks():
@@ -115,8 +124,7 @@ def test_an_ensemble_window_averages_only_the_latest_chunks():
     cfg = replace(TINY_ACT, horizon=4, temporal_ensemble=0.5, ensemble_window=2)
     policy = ACTPolicy.from_model(ACTModel(cfg))
     chunks = iter([np.full((4, 14), v) for v in (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)])
-    policy.chunk = lambda state: next(chunks)
-    out = [policy.schedule(None)[0] for policy.t in range(6)]
+    out = ensembled(policy, chunks)
     w = np.exp(-0.5 * np.arange(2))
     # at step 5 only the chunks of steps 4 and 5 vote; those of steps 2 and 3 still cover it
     assert out[5] == pytest.approx((w @ [5, 6]) / w.sum())
@@ -141,9 +149,10 @@ def sampled_action_error(policy, dataset) -> float:
                 state = item[L.STATE][None]
                 features = policy.model.observe([item[L.image_key(c)][None] for c in cfg.cameras],
                                                 state)
-                policy.window = (policy.window or [features] * cfg.obs_steps)[1:] + [features]
+                slot = policy.slots[0]
+                slot.window = (slot.window or [features] * cfg.obs_steps)[1:] + [features]
                 if t % cfg.execute == 0:
-                    chunk = policy.chunk(state)[:cfg.execute]
+                    chunk = policy.chunks(state, [0])[0][:cfg.execute]
                     errors.append(np.abs(chunk - item[L.ACTION][:cfg.execute].numpy()).mean())
     return float(np.mean(errors))
 
@@ -308,6 +317,8 @@ def test_baseline_through_the_evaluation_harness(ckpt, tmp_path):
     from rmbench.eval.harness import read_records
 
     name, path = ckpt
+    # the env renders the cameras the checkpoint was trained on, read from its config.json
+    assert env_options(f"{name}:{path}") == {"cameras": ("head", "left_wrist")}
     evaluate(EvalConfig(("observe_and_pickup",), f"{name}:{path}", tmp_path / "e", episodes=1,
                         video="none", progress=False, seed_cache=tmp_path / "seeds"))
     (rec,) = read_records(tmp_path / "e" / "observe_and_pickup" / "episodes.jsonl")
@@ -452,7 +463,7 @@ def test_state_checkpoint_round_trip_and_the_pixel_observation_error(state_ckpt)
     assert runs[0].shape[1] == 14 and np.isfinite(runs[0]).all()
     env = make("observe_and_pickup", cameras=("head", "left_wrist"), width=64, height=48)
     policy = policy_cls(str(path), env)
-    assert policy.cameras == ()
+    assert policy_cameras(f"{name}:{path}") == ()  # a state checkpoint: nothing to render
     obs, _ = env.reset(seed=100001)
     with pytest.raises(ValueError, match="no 'environment_state'.*environment_state_agent_pos"):
         policy.act(obs)
@@ -462,7 +473,6 @@ def test_state_checkpoint_round_trip_and_the_pixel_observation_error(state_ckpt)
 def test_state_baseline_through_the_evaluation_harness(state_ckpt, tmp_path):
     from rmbench.eval import EvalConfig, evaluate
     from rmbench.eval.harness import read_records
-    from rmbench.policies.registry import env_options
 
     name, path = state_ckpt
     assert env_options(f"{name}:{path}") == {"obs_type": "environment_state_agent_pos"}

@@ -1,8 +1,11 @@
 """Training-side access: action chunks, the in-order episode sampler, the frame cache."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
+from torch.utils.data._utils.collate import default_collate
 
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset
@@ -60,3 +63,61 @@ def test_loader_batches_in_slot_order(demos):
     loader = torch.utils.data.DataLoader(demos, batch_sampler=EpisodeOrderSampler(demos, 2, seed=0))
     batch = next(iter(loader))
     assert batch[L.ACTION].shape == (2, 30, 14) and batch["episode_start"].all()
+
+
+def reference_item(d: DemoDataset, i: int) -> dict[str, torch.Tensor]:
+    """Item ``i`` read off its episode one field at a time: what a batch must hold per row."""
+    k = int(np.searchsorted(d.starts, i, side="right") - 1)
+    t = i - int(d.starts[k])
+    ep, n = d.low_dim[k], len(d.low_dim[k])
+    seen = np.maximum(np.arange(t - d.history + 1, t + 1), 0) if d.history > 1 else t
+    item = {L.STATE: torch.from_numpy(ep.state[seen].copy()),
+            L.ACTION: torch.from_numpy(ep.action[np.minimum(np.arange(t, t + d.chunk), n - 1)]),
+            "action_is_pad": torch.from_numpy(np.arange(t, t + d.chunk) >= n),
+            L.SUBTASK_INDEX: torch.tensor(int(ep.subtask_index[t])),
+            L.SUBTASK_END: torch.tensor(bool(ep.subtask_end[t])),
+            L.SUBTASK_STEP: torch.tensor(int(ep.subtask_step[t])),
+            "task_index": torch.tensor(d.task_index[k]), "episode_index": torch.tensor(ep.index),
+            "frame_index": torch.tensor(t), "episode_start": torch.tensor(t < d.stride)}
+    if d.environment_state:
+        item[L.ENV_STATE] = torch.from_numpy(ep.environment_state[seen].copy())
+    for cam in d.cameras:
+        frame = np.array(d.cache.frames(d.episode_ids[k], cam)[seen])
+        item[L.image_key(cam)] = torch.from_numpy(frame).movedim(-1, -3).contiguous()
+    return item
+
+
+def assert_batch_is_items(d: DemoDataset, indices: list[int]) -> None:
+    batch = d.batch(indices)
+    expected = default_collate([reference_item(d, i) for i in indices])
+    assert batch.keys() == expected.keys()
+    for key, value in expected.items():
+        assert batch[key].dtype == value.dtype and torch.equal(batch[key], value), key
+
+
+@pytest.mark.parametrize("options", [{}, {"history": 3, "stride": 4, "environment_state": True}])
+def test_a_batch_gathers_what_its_items_hold(demos, options, tmp_path):
+    """One gather over the concatenated episodes builds the batch the items would, bit for
+    bit, in any order, episode ends and starts included."""
+    d = DemoDataset(demos.ds, chunk=12, image_size=(32, 48), cache_dir=demos.cache.dir, **options)
+    n0 = int(d.lengths[0])
+    edges = [0, n0 - 1, n0, n0 - 12, len(d) - 1]
+    assert_batch_is_items(d, edges + np.random.default_rng(0).integers(len(d), size=40).tolist())
+    with pytest.raises(IndexError):
+        d.batch([0, len(d)])
+
+
+def test_a_batch_follows_episodes_added_or_replaced(demos):
+    """Batches gather from columns built once; adding or replacing episodes rebuilds them."""
+    d = DemoDataset(demos.ds, chunk=5, cameras=[])
+    d.batch([0])
+    doubled = [replace(ep, action=ep.action * 2) for ep in d.low_dim]
+    d.replace_episodes(doubled)
+    assert_batch_is_items(d, [0, 3, len(d) - 1])
+    assert torch.equal(d[0][L.ACTION], torch.from_numpy(doubled[0].action[:5]))
+    before = len(d)
+    d.add_episodes([replace(doubled[0], index=99)])
+    assert len(d) == before + len(doubled[0])
+    assert_batch_is_items(d, [before, len(d) - 1])
+    with pytest.raises(ValueError, match="same length"):
+        d.replace_episodes(doubled[:1])

@@ -47,9 +47,12 @@ def test_results_pages_start_with_their_table(page):
     assert any(re.match(r"^\|.*\|$", line) for line in lines), f"{page.name}: no table in its first 40 lines"
 
 
+MACHINES = {"cpu": {"label": "CPU"}, "h100": {"label": "H100"}}
+
+
 def test_a_cell_pooled_over_seeds_shows_each_seed():
-    """A pooled cell's record names each seed's success and walls (a seed's hand-written wall
-    where it has one), and one evaluation's wall is the fastest seed's."""
+    """A pooled cell's record names each seed's success and walls (each with the conditions its
+    record keeps), and one evaluation's wall is the fastest seed's."""
     render_docs = _render_docs()
 
     def seed(k, train, evals, **extra):
@@ -58,12 +61,68 @@ def test_a_cell_pooled_over_seeds_shows_each_seed():
 
     cell = {"successes": 130, "episodes": 200, "mean_progress": 0.9,
             "endings": {"success": 130, "task_failure": 70}, "failure_reasons": {"short": 70},
-            "seeds": {"0": seed(69, 600.0, 300.0, record={"train_wall": "10 min on a GPU"},
-                                planner_refit={"from": "x"}),
+            "seeds": {"0": seed(69, 600.0, 300.0, planner_refit={"from": "x"},
+                                conditions={"train": [{"machine": "h100"}],
+                                            "eval": [{"jobs_beside": 1, "beside": "a training"}]}),
                       "1": seed(61, 1200.0, 180.0)}}
-    (row,) = render_docs._record_rows({"press_button": {"mem0": cell}})
+    (row,) = render_docs._record_rows({"press_button": {"mem0": cell}}, MACHINES)
     assert row[2] == "130/200 (seeds 0: 69, 1: 61)"
-    assert row[6].startswith("10 min on a GPU (the executor), then its planner refit")
+    assert row[6].startswith("10.0 min on H100 (the executor), then its planner refit")
     assert row[6].endswith("(seed 0) + 20.0 min (seed 1)")
-    assert row[7] == "5.0 min (seed 0) + 3.0 min (seed 1)"
+    assert row[7] == "5.0 min (beside a training) (seed 0) + 3.0 min (seed 1)"
     assert render_docs._one_eval(cell) == 180.0
+
+
+def test_a_wall_prints_its_conditions_and_its_pieces():
+    """A wall's conditions come from its record's fields, in one wording: the machine where it
+    is not the page's one, the threads or workers, the jobs beside it; a training run in pieces
+    piece by piece, a piece before the step its wall is timed from marked not timed."""
+    wall = _render_docs()._wall
+    one = {"train_wall_s": 2610.0, "eval_wall_s": 174.0, "conditions": {
+        "train": [{"machine": "cpu", "threads": 2, "jobs_beside": 1,
+                   "beside": "the test suite for 13 min of it"}],
+        "eval": [{"workers": 2, "jobs_beside": 0}]}}
+    assert wall(one, "train", MACHINES) == ("43.5 min (2 torch threads, beside the test suite "
+                                            "for 13 min of it)")
+    assert wall(one, "eval", MACHINES) == "2.9 min (2 workers, alone)"
+    pieces = {"train_wall_s": 1932.0, "train_wall_from_step": 16500, "conditions": {"train": [
+        {"machine": "h100", "steps": [0, 8000], "jobs_beside": 7, "beside": "seven other trainings"},
+        {"machine": "cpu", "steps": [8000, 16500], "note": "several runs"},
+        {"machine": "cpu", "steps": [16500, 18000], "wall_s": 1932.0, "jobs_beside": 1}]}}
+    assert wall(pieces, "train", MACHINES) == (
+        "32.2 min from step 16,500: on H100 to step 8,000 (beside seven other trainings, not "
+        "timed); on CPU to step 16,500 (several runs, not timed); 32.2 min on CPU to step 18,000 "
+        "(beside 1 other job)")
+    assert wall({"train_wall_s": 60.0}, "train", MACHINES) == "1.0 min"  # no conditions kept
+
+
+def test_every_record_keeps_its_wall_conditions_as_fields():
+    """Each cell's (or seed's) record in the state table keeps the conditions of its walls as
+    fields, none as words: a training's pieces run from step 0 to its last step, one after the
+    other, their kept walls add up to its wall, and each machine is one the results name."""
+    import json
+
+    res = json.loads((ROOT / "benchmarks" / "results" / "table_state.json").read_text())
+    assert set(res["wall_defaults"]["train"]) == {"machine", "threads", "jobs_beside"}
+    steps = res["plan"]["steps"]
+    groups = [res["cells"], *(g["cells"] for g in res["superseded"])]
+    records = [(t, s, r) for cells in groups for t, row in cells.items() for s, c in row.items()
+               for r in (c.get("seeds") or {"0": c}).values()]
+    assert len(records) == 99
+    for task, spec, r in records:
+        where = f"{task} {spec}"
+        assert not {"train_wall", "eval_wall"} & set(r.get("record", {})), where
+        train, evals = r["conditions"]["train"], r["conditions"]["eval"]
+        assert len(evals) == 1 and (train == [] if spec == "mem0:gt_classifier" else train), where
+        for piece in [*train, *evals]:
+            assert piece["machine"] is None or piece["machine"] in res["machines"], where
+            assert piece["jobs_beside"] is None or piece["jobs_beside"] >= 0, where
+        if len(train) > 1:
+            ends = [p["steps"] for p in train]
+            assert ends[0][0] == 0 and ends[-1][1] == steps, where
+            assert all(a[1] == b[0] for a, b in zip(ends, ends[1:], strict=False)), where
+            start = r["train_wall_from_step"]
+            timed = [p["wall_s"] for p in train if p["steps"][0] >= start and p["wall_s"]]
+            assert sum(timed) <= r["train_wall_s"] + 1e-6, where
+            if all(p["wall_s"] for p in train if p["steps"][0] >= start):
+                assert sum(timed) == pytest.approx(r["train_wall_s"]), where

@@ -209,6 +209,32 @@ def test_a_broken_policy_plugin_leaves_every_other_policy_loadable(monkeypatch):
         registry.parse_spec("theirs")
 
 
+def test_the_registration_alone_says_which_cameras_a_policy_reads():
+    from rmbench.policies import registry
+
+    class Carrying(BasePolicy):
+        cameras = ()  # what a registration without cameras=() does not know
+
+    register_policy("test_reads_by_argument", "cameras from the argument", needs_argument=True,
+                    cameras=lambda arg: tuple(c for c in arg.split(",") if c))(
+        lambda arg, env: BasePolicy())
+    register_policy("test_carries_cameras", "a cameras attribute beside a default registration")(
+        lambda arg, env: Carrying())
+    try:
+        assert registry.env_options("test_reads_by_argument:head") == {"cameras": ("head",)}
+        assert registry.env_options("test_reads_by_argument:,") == {"render": False}
+        assert registry.policy_cameras("test_reads_by_argument:head,left_wrist") == (
+            "head", "left_wrist")
+        assert registry.policy_cameras("test_carries_cameras") == (
+            "head", "left_wrist", "right_wrist")  # the station's default set
+        with pytest.raises(ValueError, match=r"carries cameras=\(\).*register_policy\("
+                                             r"'test_carries_cameras', cameras=\.\.\.\)"):
+            registry.make_policy("test_carries_cameras", None)
+    finally:
+        for name in ("test_reads_by_argument", "test_carries_cameras"):
+            registry.POLICIES.pop(name, None)
+
+
 def test_report_renders_markdown_and_html(tmp_path):
     from rmbench.eval.report import write_report
 

@@ -39,7 +39,7 @@ def test_the_lerobot_env_runs_rmbench_verified_seeds_with_the_instruction(tmp_pa
 
 
 def test_a_lerobot_checkpoint_names_the_observation_it_reads(tmp_path):
-    from rmbench.lerobot.policy import obs_type
+    from rmbench.lerobot.policy import checkpoint_cameras, obs_type
 
     def ckpt(*keys):
         (tmp_path / "config.json").write_text(json.dumps(
@@ -53,6 +53,10 @@ def test_a_lerobot_checkpoint_names_the_observation_it_reads(tmp_path):
         "pixels_environment_state_agent_pos"
     with pytest.raises(ValueError, match="no config.json"):
         obs_type(str(tmp_path / "missing"))
+    # and the cameras whose images it reads: its env renders those, or nothing
+    assert checkpoint_cameras(ckpt("observation.images.head", "observation.images.left_wrist",
+                                   "observation.state")) == ("head", "left_wrist")
+    assert checkpoint_cameras(ckpt("observation.state", "observation.environment_state")) == ()
 
 
 @pytest.mark.slow

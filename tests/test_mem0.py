@@ -18,6 +18,7 @@ from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import Planner, planner_examples, runs
 from rmbench.policies.mem0.train import train_mem0
+from rmbench.policies.registry import env_options, policy_cameras
 from rmbench.training.loop import TrainConfig, TrainingError
 from tests.conftest import EXPORTED, keep_exports, roll_out
 
@@ -340,6 +341,8 @@ def test_checkpoint_round_trip_gives_identical_actions(mn_ckpt):
     env.close()
     np.testing.assert_array_equal(runs_[0], runs_[1])
     assert runs_[0].shape == (6, 14) and np.isfinite(runs_[0]).all()
+    # its env renders the cameras the checkpoint was trained on, read from its config.json
+    assert env_options(f"mem0:{mn_ckpt}") == {"cameras": TINY.cameras}
 
 
 def test_bad_checkpoints_give_one_line_errors(mn_ckpt, tmp_path):
@@ -489,7 +492,7 @@ def test_state_planner_and_memories_hold_state_embeddings(mn_state_ckpt, mn_data
     assert report["decisions"] == sum(h["d1"] + h["d2"] + 2 for h in map(json.loads, hidden))
     env = make("press_button", obs_type="environment_state_agent_pos")
     policy = Mem0Policy(f"{mn_state_ckpt}?ablation=gt_classifier", env)
-    assert policy.cameras == ()  # the env need not render
+    assert policy_cameras(f"mem0:{mn_state_ckpt}") == ()  # the env need not render
     obs, info = env.reset(seed=100000)
     policy.reset(info["instruction"], {"seed": 100000})
     model, inputs = policy.model, policy.inputs(obs)
@@ -549,7 +552,6 @@ def test_inference_runs_on_one_thread_whatever_the_process_has(mn_state_ckpt):
 def test_state_mem0_through_the_evaluation_harness(mn_state_ckpt, tmp_path):
     from rmbench.eval import EvalConfig, evaluate
     from rmbench.eval.harness import read_records
-    from rmbench.policies.registry import env_options
 
     spec = f"mem0:{mn_state_ckpt}?ablation=gt_classifier"
     assert env_options(spec) == {"obs_type": "environment_state_agent_pos"}
@@ -673,12 +675,12 @@ def test_temporal_ensemble_averages_the_chunks_that_cover_a_step(mn_state_ckpt):
     horizon = policy.cfg.horizon
     asked = []
 
-    def chunk(c, observation, length):
-        asked.append((policy.t, length))
-        return np.full((length, 14), float(len(asked)))
+    def chunks(c, observations, due, length):
+        asked.extend((policy.t, length) for _ in due)
+        return {i: np.full((length, 14), float(len(asked))) for i in due}
 
-    policy.chunk = chunk
-    policy.ended = lambda c, z: False
+    policy.chunks = chunks
+    policy.end_probabilities = lambda c, z: torch.zeros(len(z))
     out = [policy.act(obs)[0] for _ in range(horizon + 1)]
     assert asked == [(t, horizon) for t in range(0, horizon + 1, 3)]
     w = np.exp(-0.5 * np.arange(3))

@@ -1,4 +1,4 @@
-"""The paper's published numbers (suite/published.json): one source for every published rate
+"""The paper's published numbers (eval/published.json): one source for every published rate
 rmbench prints, covering the nine tasks, with the averages the paper states matching its
 per-task numbers."""
 
@@ -7,8 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rmbench.eval import report
-from rmbench.suite import published
+from rmbench.eval import published, report
 from rmbench.tasks.registry import ordered
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,5 +68,5 @@ def test_averages_the_paper_does_not_state_are_derived():
 
 def test_the_data_file_is_packaged():
     config = tomllib.loads((ROOT / "pyproject.toml").read_text())
-    assert "published.json" in config["tool"]["setuptools"]["package-data"]["rmbench.suite"]
-    assert (ROOT / "src" / "rmbench" / "suite" / "published.json").is_file()
+    assert "published.json" in config["tool"]["setuptools"]["package-data"]["rmbench.eval"]
+    assert (ROOT / "src" / "rmbench" / "eval" / "published.json").is_file()

@@ -48,8 +48,8 @@ class StateReader(BasePolicy):
 
 
 if "slow_echo_test" not in POLICIES:
-    register_policy("slow_echo_test", "test policy: echoes agent_pos, sometimes late")(
-        lambda arg, env: SlowEcho())
+    register_policy("slow_echo_test", "test policy: echoes agent_pos, sometimes late",
+                    cameras=())(lambda arg, env: SlowEcho())
     register_policy("state_reader_test", "test policy reading the environment state",
                     obs_type=lambda arg: "environment_state_agent_pos")(
         lambda arg, env: StateReader(env))

@@ -32,8 +32,6 @@ class CameraMean(BasePolicy):
     """Reads two cameras: answers agent_pos with the head frame's mean brightness added to
     its first entry, so a reply shows which observation it answers."""
 
-    cameras = CAMERAS
-
     def act(self, observation):
         action = np.array(observation["agent_pos"], np.float64)
         action[0] += head_mean(observation)
@@ -41,7 +39,7 @@ class CameraMean(BasePolicy):
 
 
 if "camera_mean_test" not in POLICIES:
-    register_policy("camera_mean_test", "test policy reading two cameras")(
+    register_policy("camera_mean_test", "test policy reading two cameras", cameras=CAMERAS)(
         lambda arg, env: CameraMean())
 
 

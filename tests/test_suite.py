@@ -2,6 +2,7 @@
 folders, the jobs a table still needs, a toy table end to end (resumed, a corrupt checkpoint
 failing its cell alone) and the tables it writes."""
 
+import argparse
 import importlib.util
 import io
 import json
@@ -14,13 +15,17 @@ from rmbench.eval.chance import chance
 from rmbench.machine import describe, short
 from rmbench.suite import runner, stages, tables
 from rmbench.suite.plan import (
+    GENERIC,
+    RECIPES,
     Plan,
+    add_recipe_arguments,
     applies,
     bounded,
     check_sets,
     config_for,
     memory_of,
     parse_policy,
+    recipe_of,
     run_name,
     trained_spec,
 )
@@ -87,6 +92,34 @@ def test_set_reaches_only_the_configs_with_the_field():
         check_sets(["head_layers"])
 
 
+def table_recipe(argv: list[str], obs: str = "state") -> dict:
+    parser = argparse.ArgumentParser()
+    add_recipe_arguments(parser, defaults="recipe")
+    return recipe_of(parser.parse_args(argv), RECIPES[obs])
+
+
+def test_the_state_recipe_is_the_state_tables_default(tmp_path):
+    # the state table's command as its cells were made, every item spelled out
+    spelled = table_recipe(
+        "--demos 50 --steps 18000 --batch 128 --episodes 100 --noise 0.02 --noise-kind white "
+        "--set mem0.head_layers=2 --set mem0.execute=20 --set relative_actions=false "
+        "--set mem0.action_patch=3 --set state_noise=0.02 --set state_noise_on=[\"mat_\"] "
+        "--set grasp_pose_input=true --set layout_copies=16 --set layout_shift=0.04 "
+        "--set mem0.sample_noise=0".split())
+    assert table_recipe([]) == spelled  # the same cells, in the same folders
+    plan = Plan("state", ("put_back_block",), ("mem0",), **table_recipe([]))
+    assert config_for("mem0", "state", plan.sets).head_layers == 2
+    # an option replaces the recipe's item for its field, and the rest stays
+    changed = table_recipe(["--steps", "900", "--set", "mem0.execute=8"])
+    assert changed["steps"] == 900 and "mem0.execute=8" in changed["sets"]
+    assert "mem0.execute=20" not in changed["sets"] and "layout_copies=16" in changed["sets"]
+    assert config_for("mem0", "state", changed["sets"]).execute == 8
+    # outside a table (benchmarks/learning.py) the options start from the generic defaults
+    parser = argparse.ArgumentParser()
+    add_recipe_arguments(parser)
+    assert recipe_of(parser.parse_args([])) == {**GENERIC, "sets": ()}
+
+
 def test_a_long_recipe_gets_a_folder_name_the_file_system_takes(tmp_path):
     # the state table's M(n) recipe: 12 --set items
     sets = ["mem0.head_layers=2", "mem0.execute=20", "relative_actions=false",
@@ -136,7 +169,7 @@ def toy_table(tmp_path_factory):
     out = tmp_path_factory.mktemp("table")
     args = ["table", "--obs", "state", "--tasks", "observe_and_pickup", "--policies", "mem0,dp",
             "--demos", "2", "--steps", "6", "--batch", "4", "--episodes", "1", "--out", str(out),
-            "--jobs", "2"]
+            "--jobs", "2", "--no-recipe"]
     assert cli(args) == 0
     return out, args
 
@@ -370,7 +403,7 @@ def test_a_terminated_table_stops_its_jobs(toy_table, tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "rmbench.cli.main", "table", "--obs", "state",
                              "--tasks", "observe_and_pickup", "--policies", "dp", "--demos", "2",
                              "--steps", "100000", "--batch", "4", "--episodes", "1", "--out",
-                             str(out)], stderr=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+                             str(out), "--no-recipe"], stderr=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
     def jobs(kind=b""):
         found = []
@@ -440,6 +473,10 @@ def test_tables_give_each_rate_its_interval_and_mem0_its_differences():
            "wall_s": {"table": None, "collect": {}}, "machine": describe()}
     text = tables.markdown(res)
     assert "| put_back_block | M(1) | 85.0 [77, 91] | 80.0 [71, 87] | 7.0 [3, 14] | — |" in text
+    # the paper's ablations table beside them, task by task (eval/published.json)
+    assert ("| Mem-0 (published) | w/o Anchor (published) | w/o Sliding (published) | chance"
+            in text and "| — | 90.0 [83, 94] | 35.0 [26, 45] | 78.0 [69, 85] | 25.0 |" in text)
+    assert "Published: arXiv 2603.01229, ablations table." in text
     assert "| put_back_block | M(1) | +5 [-6, +16] | +78 [+67, +85]* | — |" in text
     # the option off: the tables as they were
     plain = tables._markdown_table(res, ["mem0"])

@@ -7,6 +7,7 @@ import json
 import sys
 
 from rmbench.cli.common import add_json
+from rmbench.seeds import SPLITS
 from rmbench.suite.plan import add_recipe_arguments
 
 
@@ -18,9 +19,11 @@ def cmd_eval(args) -> int:
     if not tasks:
         raise ValueError("name a task with --task, or --all")
     cfg = EvalConfig(tuple(tasks), args.policy, args.out, episodes=args.episodes, seed=args.seed,
-                     workers=args.workers, backend=args.backend, video=args.video,
+                     workers=args.workers, batch=args.batch, backend=args.backend,
+                     video=args.video,
                      instructions=args.instructions, progress=not args.json,
-                     seeds_of=args.seeds_of, memory_reset=args.memory_reset)
+                     seeds_of=args.seeds_of, memory_reset=args.memory_reset,
+                     split=args.split)
     summary = evaluate(cfg)
     if args.json:
         print(json.dumps(summary, indent=2))
@@ -91,7 +94,7 @@ def cmd_table(args) -> int:
     from pathlib import Path
 
     from rmbench.suite import runner, tables
-    from rmbench.suite.plan import ALL_POLICIES, Plan, recipe_of, with_seed
+    from rmbench.suite.plan import ALL_POLICIES, RECIPES, Plan, recipe_of, with_seed
     from rmbench.tasks.registry import ordered
 
     tasks = ([t.name for t in ordered()] if args.tasks == "all"
@@ -102,7 +105,8 @@ def cmd_table(args) -> int:
         raise ValueError(f"--train-seeds takes whole numbers >= 0, got {args.train_seeds!r}")
     policies = [with_seed(p, s) for p in policies for s in seeds]
     plan = Plan(args.obs, tuple(tasks), tuple(policies), video=args.video, device=args.device,
-                **recipe_of(args))
+                split=args.split,
+                **recipe_of(args, None if args.no_recipe else RECIPES[args.obs]))
     out = Path(args.out or f"runs/table_{args.obs}")
     if args.report_only:
         # a table built a few cells at a time (calls narrowed with --tasks and --policies)
@@ -133,6 +137,35 @@ def cmd_serve(args) -> int:
     return 0
 
 
+class PolicyHelp(argparse.Action):
+    """``-h``/``--help`` that ends with the registered policies, plugins included. The plugins
+    are imported only when the help is asked for, so no other command pays for them."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                 help=None):
+        super().__init__(option_strings, dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from rmbench.policies.registry import registered_policies
+
+        entries = registered_policies()
+        names = [e.name + (":ARG" if e.needs_argument else "") for e in entries]
+        width = max(map(len, names), default=0)
+        parser.epilog = "policies (--policy):\n" + "\n".join(
+            f"  {name:<{width}}  {e.help}" for name, e in zip(names, entries, strict=True))
+        parser.print_help()
+        parser.exit()
+
+
+def policy_parser(sub, name: str, help: str) -> argparse.ArgumentParser:
+    """A subcommand taking ``--policy``, whose help lists the policies it can run."""
+    p = sub.add_parser(name, help=help, add_help=False,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("-h", "--help", action=PolicyHelp,
+                   help="show this help message, with the registered policies, and exit")
+    return p
+
+
 def frame_size(text: str) -> tuple[int, int]:
     """``HxW`` -> (H, W), for argparse."""
     h, sep, w = text.partition("x")
@@ -142,14 +175,19 @@ def frame_size(text: str) -> tuple[int, int]:
 
 
 def add_parsers(sub) -> None:
-    p = sub.add_parser("eval", help="evaluate a policy on expert-verified seeds")
+    p = policy_parser(sub, "eval", "evaluate a policy on expert-verified seeds")
     p.add_argument("--task", action="append", help="task name or gym id (repeatable)")
     p.add_argument("--all", action="store_true", help="every task")
     p.add_argument("--policy", required=True,
-                   help="expert | random | noop | replay:DATASET | remote:ws://HOST:PORT | ...")
+                   help="expert | random | noop | replay:DATASET | remote:ws://HOST:PORT | "
+                        "... (every registered policy: below)")
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--seed", type=int, default=0,
                    help="evaluation seed s: episodes from 100000 * (1 + s) up")
+    p.add_argument("--split", choices=SPLITS, default="test",
+                   help="test: the evaluation seed's test episodes, the ones tables report; "
+                        "validation: its validation episodes, disjoint from them, where recipes "
+                        "are chosen and compared (from 100000 * (1 + s) + 50000 up)")
     p.add_argument("--seeds-of", metavar="DATASET",
                    help="run the seeds DATASET's demonstrations were recorded on instead (the "
                         "layouts a policy trained on: its score there against --seed's held-out "
@@ -161,14 +199,18 @@ def add_parsers(sub) -> None:
                         "evaluated without it")
     p.add_argument("--out", required=True, help="results folder (resumed if it exists)")
     p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--batch", type=int, default=8,
+                   help="episodes each worker plays side by side, the policy asked once per "
+                        "step for all of them (a policy with act_batch; others play one at a "
+                        "time)")
     p.add_argument("--backend", choices=["local", "ray"], default="local")
     p.add_argument("--video", default="first:1", help="first:K | failures | none")
     p.add_argument("--instructions", choices=["seen", "unseen"], default="seen")
     add_json(p)
     p.set_defaults(func=cmd_eval)
 
-    p = sub.add_parser("open-loop", help="a policy's action error on recorded demonstrations, "
-                                         "fed the recorded observations, beside holding still")
+    p = policy_parser(sub, "open-loop", "a policy's action error on recorded demonstrations, "
+                                        "fed the recorded observations, beside holding still")
     p.add_argument("--policy", required=True, help="policy spec, e.g. mem0:CKPT")
     p.add_argument("--dataset", required=True, help="an rmbench dataset folder")
     p.add_argument("--episodes", type=int, nargs="+", default=[0, 1], metavar="E",
@@ -202,8 +244,14 @@ def add_parsers(sub) -> None:
     p.add_argument("--train-seeds", default="0", metavar="N[,N...]",
                    help="train every column with each of these seeds; its cell pools their "
                         "evaluations (the mean over seeds), each seed's row kept (default 0)")
-    add_recipe_arguments(p)
+    add_recipe_arguments(p, defaults="recipe")
+    p.add_argument("--no-recipe", action="store_true",
+                   help="start from the generic defaults (3,000 steps at batch 32, no noise, no "
+                        "--set items) instead of the --obs recipe: a quick or custom table")
     p.add_argument("--video", default="none", help="evaluation videos: first:K, failures, none")
+    p.add_argument("--split", choices=SPLITS, default="test",
+                   help="the cells' evaluation episodes: test (what a table reports) or "
+                        "validation (disjoint from them: where a recipe is chosen)")
     p.add_argument("--device", default="cpu",
                    help="where the cells train: cpu | cuda | cuda:N (a run started on a GPU "
                         "resumes on a CPU; collection and evaluation stay on the CPU)")
@@ -217,7 +265,7 @@ def add_parsers(sub) -> None:
                         "from the cells --out already holds")
     p.set_defaults(func=cmd_table)
 
-    p = sub.add_parser("serve", help="serve a policy over a websocket (msgpack-numpy)")
+    p = policy_parser(sub, "serve", "serve a policy over a websocket (msgpack-numpy)")
     p.add_argument("--policy", required=True, help="policy spec, e.g. random or replay:DATASET")
     p.add_argument("--task", required=True, help="the task the policy acts in")
     p.add_argument("--host", default="127.0.0.1", help="bind address (default: this machine only)")

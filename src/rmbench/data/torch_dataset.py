@@ -118,9 +118,14 @@ class DemoDataset(torch.utils.data.Dataset):
         if environment_state and self.ds.state_names is None:
             raise ValueError(f"{self.ds.root} has no {L.ENV_STATE} (collected before it existed)")
         self.task_index = [self.ds.instructions.index(ep.instruction) for ep in self.low_dim]
-        lengths = np.array([len(ep) for ep in self.low_dim], dtype=np.int64)
-        self.starts = np.concatenate([[0], np.cumsum(lengths)])
-        self.lengths = lengths
+        self._index()
+
+    def _index(self) -> None:
+        """Where each episode starts among the concatenated frames; the concatenated columns
+        that batches gather from are built anew on the next batch."""
+        self.lengths = np.array([len(ep) for ep in self.low_dim], dtype=np.int64)
+        self.starts = np.concatenate([[0], np.cumsum(self.lengths)])
+        self._columns: dict[str, np.ndarray] | None = None
 
     def add_episodes(self, episodes: list) -> None:
         """Append episodes held in memory (``reader.Episode``, e.g. augmented copies of this
@@ -132,49 +137,92 @@ class DemoDataset(torch.utils.data.Dataset):
         self.low_dim += episodes
         self.episode_ids += [ep.index for ep in episodes]
         self.task_index += [self.ds.instructions.index(ep.instruction) for ep in episodes]
-        self.lengths = np.array([len(ep) for ep in self.low_dim], dtype=np.int64)
-        self.starts = np.concatenate([[0], np.cumsum(self.lengths)])
+        self._index()
+
+    def replace_episodes(self, episodes: list) -> None:
+        """Put ``episodes`` in place of the held ones, one for one and of the same lengths
+        (their actions converted to another action space, say)."""
+        if [len(ep) for ep in episodes] != self.lengths.tolist():
+            raise ValueError("replace_episodes takes one episode of the same length per held one")
+        self.low_dim = list(episodes)
+        self._index()
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The per-frame columns of every episode, concatenated in flat-index order (what a
+        batch gathers from), built once after the episodes last changed."""
+        if self._columns is None:
+            eps = self.low_dim
+            cols = {L.STATE: np.concatenate([ep.state for ep in eps]),
+                    L.ACTION: np.concatenate([ep.action for ep in eps]),
+                    L.SUBTASK_INDEX: np.concatenate([ep.subtask_index for ep in eps]),
+                    L.SUBTASK_END: np.concatenate([ep.subtask_end for ep in eps]),
+                    L.SUBTASK_STEP: np.concatenate([ep.subtask_step for ep in eps])}
+            if self.environment_state:
+                cols[L.ENV_STATE] = np.concatenate([ep.environment_state for ep in eps])
+            self._columns = cols
+        return self._columns
 
     def __len__(self) -> int:
         return int(self.starts[-1])
 
     def locate(self, i: int) -> tuple[int, int]:
         """Flat index -> (position in ``episode_ids``, frame)."""
-        if not 0 <= i < len(self):
-            raise IndexError(f"index {i} out of range for {len(self)} frames")
-        k = int(np.searchsorted(self.starts, i, side="right") - 1)
-        return k, int(i - self.starts[k])
+        k, t = self.locate_many([i])
+        return int(k[0]), int(t[0])
 
-    def observed(self, t: int) -> int | np.ndarray:
-        """The frames an item at frame ``t`` observes: ``t``, or with a history the last n,
-        oldest first, the episode's first repeated before its start."""
-        return np.maximum(np.arange(t - self.history + 1, t + 1), 0) if self.history > 1 else t
+    def observed(self, t):
+        """The frames an item at frame ``t`` (or each of an array of frames) observes: ``t``,
+        or with a history the last n, oldest first (a trailing axis), the episode's first
+        repeated before its start."""
+        if self.history == 1:
+            return t
+        return np.maximum(np.asarray(t)[..., None] + np.arange(1 - self.history, 1), 0)
+
+    def locate_many(self, indices) -> tuple[np.ndarray, np.ndarray]:
+        """Flat indices -> (positions in ``episode_ids``, frames), as arrays."""
+        i = np.asarray(indices, dtype=np.int64).reshape(-1)
+        if i.size and not (0 <= i.min() and i.max() < len(self)):
+            bad = int(i[(i < 0) | (i >= len(self))][0])
+            raise IndexError(f"index {bad} out of range for {len(self)} frames")
+        k = np.searchsorted(self.starts, i, side="right") - 1
+        return k, i - self.starts[k]
 
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
-        k, t = self.locate(int(i))
-        ep = self.low_dim[k]
-        n = len(ep)
-        idx = np.minimum(np.arange(t, t + self.chunk), n - 1)
-        seen = self.observed(t)
-        item = {
-            L.STATE: torch.from_numpy(ep.state[seen].copy()),
-            L.ACTION: torch.from_numpy(ep.action[idx].copy()),
-            "action_is_pad": torch.from_numpy(np.arange(t, t + self.chunk) >= n),
-            L.SUBTASK_INDEX: torch.tensor(int(ep.subtask_index[t])),
-            L.SUBTASK_END: torch.tensor(bool(ep.subtask_end[t])),
-            L.SUBTASK_STEP: torch.tensor(int(ep.subtask_step[t])),
-            "task_index": torch.tensor(self.task_index[k]),
-            "episode_index": torch.tensor(ep.index),
-            "frame_index": torch.tensor(t),
+        return {key: value[0] for key, value in self.batch([i]).items()}
+
+    def batch(self, indices: list[int]) -> dict[str, torch.Tensor]:
+        """The items at ``indices``, collated: each key's values stacked along a new first
+        dimension, as ``default_collate`` stacks the items one by one, gathered from the
+        concatenated columns at once (``training.batches.batch_stream`` reads batches so)."""
+        k, t = self.locate_many(indices)
+        start, n = self.starts[k], self.lengths[k]
+        ahead = t[:, None] + np.arange(self.chunk)  # (B, chunk) frames of the action chunk
+        rows = start[:, None] + np.minimum(ahead, n[:, None] - 1)
+        seen = self.observed(t)  # (B, history) frames observed, or (B,)
+        seen_rows = (start[:, None] if self.history > 1 else start) + seen
+        col = self.columns()
+        at = start + t
+        batch = {
+            L.STATE: torch.from_numpy(col[L.STATE][seen_rows]),
+            L.ACTION: torch.from_numpy(col[L.ACTION][rows]),
+            "action_is_pad": torch.from_numpy(ahead >= n[:, None]),
+            L.SUBTASK_INDEX: torch.from_numpy(col[L.SUBTASK_INDEX][at].astype(np.int64)),
+            L.SUBTASK_END: torch.from_numpy(col[L.SUBTASK_END][at].astype(bool)),
+            L.SUBTASK_STEP: torch.from_numpy(col[L.SUBTASK_STEP][at].astype(np.int64)),
+            "task_index": torch.from_numpy(np.asarray(self.task_index, np.int64)[k]),
+            "episode_index": torch.from_numpy(np.asarray([self.low_dim[j].index for j in k],
+                                                         np.int64)),
+            "frame_index": torch.from_numpy(t.astype(np.int64)),
             # the first frame a walk with this stride visits (EpisodeOrderSampler's phase)
-            "episode_start": torch.tensor(t < self.stride),
+            "episode_start": torch.from_numpy(t < self.stride),
         }
         if self.environment_state:
-            item[L.ENV_STATE] = torch.from_numpy(ep.environment_state[seen].copy())
+            batch[L.ENV_STATE] = torch.from_numpy(col[L.ENV_STATE][seen_rows])
         for cam in self.cameras:
-            frame = np.array(self.cache.frames(self.episode_ids[k], cam)[seen])
-            item[L.image_key(cam)] = torch.from_numpy(frame).movedim(-1, -3).contiguous()
-        return item
+            frames = np.stack([self.cache.frames(self.episode_ids[j], cam)[s]
+                               for j, s in zip(k, seen, strict=True)])
+            batch[L.image_key(cam)] = torch.from_numpy(frames).movedim(-1, -3).contiguous()
+        return batch
 
 
 class EpisodeOrderSampler(Sampler[list[int]]):

@@ -10,8 +10,10 @@ Layout of ``out``::
                                each probe's rates with and without it and their difference
 
 Records are appended in seed order whatever the worker count, so results are identical for
-any number of workers or backend. A killed run re-run with the same arguments keeps every
-complete record (a torn last line is dropped) and runs only the missing seeds.
+any number of workers or backend. Within a worker a policy with the batched form of the
+interface (``policies/base.py``) plays ``batch`` episodes side by side (``eval/episode.py``);
+one without it plays them one after another. A killed run re-run with the same arguments
+keeps every complete record (a torn last line is dropped) and runs only the missing seeds.
 """
 
 from __future__ import annotations
@@ -28,13 +30,14 @@ from typing import Any
 from tqdm import tqdm
 
 from rmbench.eval.episode import ENDINGS
-from rmbench.eval.intervals import wilson
+from rmbench.eval.intervals import format_difference, wilson
 from rmbench.eval.probe import MemoryReset, arm_file, arm_name, compare
 from rmbench.eval.seeds import verified_seeds
-from rmbench.eval.worker import close_worker, episode_job
+from rmbench.eval.worker import close_worker, episodes_job, policy_batches
 from rmbench.identity import differences
 from rmbench.parallel import BACKENDS, in_order, make_executor
 from rmbench.policies.registry import parse_spec
+from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
@@ -62,6 +65,16 @@ class EvalConfig:
     seeds_of: str | Path | None = None
     """A dataset: run its demonstrations' seeds (the layouts a policy trained on, beside the
     held-out ones ``seed`` picks: the gap is what the policy memorised) instead of ``seed``'s."""
+    split: str = "test"
+    """The evaluation seed's episodes to run: "test", the ones a table reports, or
+    "validation", disjoint from them, where recipes are chosen (``rmbench.seeds``)."""
+    batch: int = 8
+    """Episodes a worker plays side by side, asking the policy once per step for all of them,
+    where the policy has the batched form (``policies/base.py``; others play one at a time).
+    Not part of the folder's identity, like ``workers``. A seed's record does not depend on
+    which seeds share its batch; Mem-0's numbers at another batch size differ in the last
+    float bits, which a closed loop can carry into another episode (``policies/mem0/agent.py``):
+    compare evaluations made at one batch size (1: as before batches)."""
     memory_reset: str | None = None
     """A memory probe (``eval/probe.py``: ``aliasing`` or ``every:K``): the same seeds run a
     second time with the policy reset there, into the folder's arm of that probe. Not part of
@@ -72,12 +85,14 @@ class EvalConfig:
             raise ValueError("no task to evaluate")
         object.__setattr__(self, "tasks", tuple(get_task(t).name for t in self.tasks))
         parse_spec(self.policy)  # unknown policy: one line listing the known ones
-        if self.episodes < 1 or self.workers < 1 or self.seed < 0:
-            raise ValueError("episodes and workers must be >= 1 and seed >= 0")
+        if self.episodes < 1 or self.workers < 1 or self.batch < 1 or self.seed < 0:
+            raise ValueError("episodes, workers and batch must be >= 1 and seed >= 0")
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
         if self.instructions not in ("seen", "unseen"):
             raise ValueError(f"instructions must be 'seen' or 'unseen', got {self.instructions!r}")
+        if self.split not in SPLITS:
+            raise ValueError(f"split must be one of {', '.join(SPLITS)}, got {self.split!r}")
         self.video_rule(0, True)
         if self.memory_reset is not None:
             MemoryReset.parse(self.memory_reset)
@@ -98,6 +113,8 @@ class EvalConfig:
                  "instructions": self.instructions}
         if self.seeds_of is not None:  # (absent otherwise: earlier run.json files stay valid)
             ident["seeds_of"] = str(Path(self.seeds_of).resolve())
+        if self.split != "test":  # (likewise: a test run's identity is what it was)
+            ident["split"] = self.split
         return ident
 
 
@@ -204,7 +221,7 @@ def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
             seeds = seeds[: cfg.episodes]
         else:
             seeds = verified_seeds(task, cfg.seed, cfg.episodes, cfg.seed_cache, executor,
-                                   progress=cfg.progress)
+                                   progress=cfg.progress, split=cfg.split)
         result = _run_episodes(cfg, task, folder, seeds, executor)
         if cfg.memory_reset is not None:
             _run_episodes(cfg, task, folder, seeds, executor, MemoryReset.parse(cfg.memory_reset))
@@ -237,28 +254,32 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
     done = {r["seed"] for r in records}
     todo = [(i, s) for i, s in enumerate(seeds) if s not in done]
     n_todo = len(todo)
-    calls = ((i, episode_job, (task, cfg.policy, cfg.instructions, s,
-                               cfg.video_rule(i, None) and probe is None,
-                               probe.spec if probe else None))
-             for i, s in todo)
+    size = job_size(cfg, task, len(todo), executor) if todo else 1
+    jobs = [todo[k:k + size] for k in range(0, len(todo), size)]
+    calls = ((job, episodes_job, (task, cfg.policy, cfg.instructions, [s for _, s in job],
+                                  [cfg.video_rule(i, None) and probe is None for i, _ in job],
+                                  probe.spec if probe else None, cfg.batch,
+                                  [i for i, _ in job]))
+             for job in jobs)
     desc = f"{task} {cfg.policy}" + (f" memory reset {probe.spec}" if probe else "")
     bar = tqdm(total=len(seeds), initial=len(done), unit="ep", desc=desc,
                disable=not cfg.progress, dynamic_ncols=True)
     t0 = time.perf_counter()
     try:
         with open(path, "a", encoding="utf-8") as f:
-            for i, rec in in_order(executor, calls):
-                video = rec.pop("video")
-                rec["video"] = None
-                if video is not None and cfg.video_rule(i, rec["success"]):
-                    name = f"videos/seed-{rec['seed']}.mp4"
-                    write_atomic(folder / name, video)
-                    rec["video"] = name
-                f.write(json.dumps(rec) + "\n")
-                f.flush()
-                os.fsync(f.fileno())
-                records.append(rec)
-                bar.update(1)
+            for job, recs in in_order(executor, calls):
+                for (i, _), rec in zip(job, recs, strict=True):
+                    video = rec.pop("video")
+                    rec["video"] = None
+                    if video is not None and cfg.video_rule(i, rec["success"]):
+                        name = f"videos/seed-{rec['seed']}.mp4"
+                        write_atomic(folder / name, video)
+                        rec["video"] = name
+                    f.write(json.dumps(rec) + "\n")
+                    f.flush()
+                    os.fsync(f.fileno())
+                    records.append(rec)
+                    bar.update(1)
                 bar.set_postfix(success=f"{sum(r['success'] for r in records)}/{len(records)}",
                                 refresh=False)
     finally:
@@ -266,6 +287,23 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
     log.info("%s: %d episodes in %.1fs", task, n_todo, time.perf_counter() - t0)
     order = {s: k for k, s in enumerate(seeds)}
     return summarize(task, sorted(records, key=lambda r: order[r["seed"]]))
+
+
+# Batches a job holds: more seeds than slots keep the slots busy while episodes of other
+# lengths end (a freed slot takes the next seed), fewer lose less to a kill (a job's records
+# are written when it returns) and leave work for every worker.
+JOB_BATCHES = 4
+
+
+def job_size(cfg: EvalConfig, task: str, todo: int, executor) -> int:
+    """Seeds per worker job: one for a policy without the batched form (its records are
+    written as each episode ends, as before batches), else up to ``JOB_BATCHES`` batches,
+    no more than a worker's share and no fewer than one batch."""
+    if cfg.batch == 1 or not executor.submit(policy_batches, task, cfg.policy,
+                                             cfg.instructions).result():
+        return 1
+    share = -(-todo // cfg.workers)
+    return max(cfg.batch, min(JOB_BATCHES * cfg.batch, share))
 
 
 def summary_markdown(summary: dict) -> str:
@@ -304,5 +342,4 @@ def rate_text(r: dict, episodes: int | None = None) -> str:
 
 
 def drop_text(c: dict) -> str:
-    return (f"{100 * c['drop']:+.1f} [{100 * c['drop_ci95'][0]:+.1f}, "
-            f"{100 * c['drop_ci95'][1]:+.1f}]")
+    return format_difference(c["drop"], *c["drop_ci95"], digits=1)

@@ -16,7 +16,7 @@ import numpy as np
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset
-from rmbench.policies.registry import make_policy
+from rmbench.policies.registry import make_policy, policy_cameras
 
 
 def open_loop_error(spec: str, dataset: str, episodes: list[int]) -> dict[str, Any]:
@@ -27,12 +27,14 @@ def open_loop_error(spec: str, dataset: str, episodes: list[int]) -> dict[str, A
     bad = [e for e in episodes if not 0 <= e < ds.num_episodes]
     if bad:
         raise ValueError(f"episode {bad[0]} is not in {dataset} ({ds.num_episodes} episodes)")
-    policy = make_policy(spec, None)
-    cameras = tuple(getattr(policy, "cameras", ()))
+    cameras = policy_cameras(spec)
     missing = sorted(set(cameras) - set(ds.cameras))
     if missing:
         raise ValueError(f"{spec} reads camera {missing[0]!r}, which {dataset} does not hold")
-    size = tuple(policy.cfg.image_size) if cameras else None
+    policy = make_policy(spec, None)
+    # frames at the size the learned policies were trained on; others get the dataset's own
+    cfg = getattr(policy, "cfg", None)
+    size = tuple(cfg.image_size) if cameras and hasattr(cfg, "image_size") else None
     with_state = ds.state_names is not None  # what a state policy reads (else: its ValueError)
     seeds = [int(row["rmbench/seed"]) for row in ds.episodes]
     per_episode = []

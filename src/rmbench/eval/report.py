@@ -2,7 +2,7 @@
 
 Rows are tasks grouped M(1) then M(n), with group and overall averages; columns are the
 evaluated policies (each folder's summary.json), and optionally the published success rates
-(the paper's main results table, ``suite/published.json``).
+(the paper's main results table, ``eval/published.json``).
 Markdown, or HTML with bar charts and links to the videos. Every success rate carries its
 Wilson 95% interval (``eval/intervals.py``): a published one too, over its 100 rollouts; an
 average over tasks of equal episode counts, the interval of the pooled episodes (wider than
@@ -16,14 +16,14 @@ import html
 import json
 from pathlib import Path
 
+from rmbench.eval import published as _published
 from rmbench.eval.chance import chance
 from rmbench.eval.harness import drop_text, rate_text, read_records
 from rmbench.eval.intervals import wilson
-from rmbench.suite import published as _published
 from rmbench.tasks.registry import ordered
 from rmbench.video import write_atomic
 
-# Success rates (%) of the paper's main results table, per policy and task (suite/published.py)
+# Success rates (%) of the paper's main results table, per policy and task (eval/published.py)
 PUBLISHED_ROLLOUTS = _published.rollouts()
 PUBLISHED = _published.columns("main")
 
@@ -92,7 +92,7 @@ def table(runs: list[dict], published: list[str], metric: str = "success_rate",
     without memory (``eval/chance.py``). ``tasks`` keeps only those rows (default: all nine).
     ``intervals``: success rates are ``Rate``s (floats with their count and interval).
     ``published`` names columns of the paper's ``published_table`` (``main``, ``ablations``:
-    ``suite/published.py``); None where it gives a column no number for a task, and its
+    ``eval/published.py``); None where it gives a column no number for a task, and its
     average where the paper states one."""
     intervals = intervals and metric == "success_rate"
     published = published if metric == "success_rate" else []

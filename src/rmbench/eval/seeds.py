@@ -1,9 +1,10 @@
 """Expert-verified evaluation seeds: an episode counts only if the scripted expert solves it.
 
-Candidates run from ``100000 * (1 + seed)`` upward, physics only, through the same episode
+Candidates run from the first seed of the evaluation seed's split upward (``rmbench.seeds``:
+test from ``100000 * (1 + seed)``, validation 50000 further), physics only, through the same episode
 job as the evaluation (so on the evaluation's workers). Results are taken in candidate order,
 so the list is the first N solved seeds whatever the worker count. The list is cached per
-task, gym id (its version) and evaluation seed and saved after every candidate, so re-runs and
+task, gym id (its version), evaluation seed and split and saved after every candidate, so re-runs and
 interrupted searches skip what is known; a longer list extends the cached one.
 """
 
@@ -19,7 +20,7 @@ from tqdm import tqdm
 
 from rmbench.eval.worker import close_worker, episode_job
 from rmbench.parallel import Inline
-from rmbench.seeds import EVAL_SEED_STRIDE, eval_seed_start
+from rmbench.seeds import SPLIT_STRIDE, eval_seed_start
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
 
@@ -31,10 +32,14 @@ def cache_dir() -> Path:
 
 
 def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = None,
-                   executor=None, progress: bool = False) -> list[int]:
-    """The first ``episodes`` seeds from evaluation seed ``seed`` that the expert solves."""
+                   executor=None, progress: bool = False, split: str = "test") -> list[int]:
+    """The first ``episodes`` seeds of evaluation seed ``seed``'s ``split`` that the expert
+    solves."""
     cls = get_task(task)
-    path = Path(cache or cache_dir()) / f"{cls.gym_id.replace('/', '_')}-seed{seed}.json"
+    start = eval_seed_start(seed, split)
+    # (the test split's file keeps the name it had before there were splits)
+    name = f"{cls.gym_id.replace('/', '_')}-seed{seed}" + ("" if split == "test" else f"-{split}")
+    path = Path(cache or cache_dir()) / f"{name}.json"
     state = {"task": cls.name, "gym_id": cls.gym_id, "seed": seed, "verified": [], "rejected": []}
     if path.exists():
         try:
@@ -45,8 +50,8 @@ def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = Non
     if len(verified) >= episodes:
         return verified[:episodes]
     tried = verified + [r["seed"] for r in state["rejected"]]
-    candidate = max(tried) + 1 if tried else eval_seed_start(seed)
-    end = eval_seed_start(seed) + EVAL_SEED_STRIDE
+    candidate = max(tried) + 1 if tried else start
+    end = start + SPLIT_STRIDE
     own = executor is None
     executor = executor or Inline(on_close=close_worker)
     pending: deque = deque()
@@ -62,7 +67,7 @@ def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = Non
                 candidate += 1
             if not pending:
                 raise RuntimeError(f"{cls.name}: fewer than {episodes} expert-solved seeds "
-                                   f"from {eval_seed_start(seed)}")
+                                   f"in [{start}, {end})")
             c, job = pending.popleft()
             record = job.result()
             if record["success"]:

@@ -44,6 +44,12 @@ def obs_type(path: str | None) -> str:
     return "pixels_agent_pos"
 
 
+def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
+    """The cameras whose images a checkpoint reads (none: its env renders nothing)."""
+    return tuple(k[len(IMAGE_PREFIX):] for k in checkpoint_inputs(path or "")
+                 if k.startswith(IMAGE_PREFIX))
+
+
 class LeRobotPolicy(BasePolicy):
     def __init__(self, path: str, device: str = "cpu"):
         import torch
@@ -65,7 +71,6 @@ class LeRobotPolicy(BasePolicy):
         # (C, H, W) of each camera the checkpoint reads
         self.images = {k[len(IMAGE_PREFIX):]: tuple(v["shape"]) for k, v in inputs.items()
                        if k.startswith(IMAGE_PREFIX)}
-        self.cameras = tuple(self.images)
         self.instruction = ""
 
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
@@ -100,4 +105,4 @@ class LeRobotPolicy(BasePolicy):
 
 register_policy("lerobot", "a LeRobot checkpoint (lerobot-train's pretrained_model folder; "
                 "needs LeRobot installed): lerobot:PATH", needs_argument=True,
-                obs_type=obs_type)(lambda arg, env: LeRobotPolicy(arg))
+                obs_type=obs_type, cameras=checkpoint_cameras)(lambda arg, env: LeRobotPolicy(arg))

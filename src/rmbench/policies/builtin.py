@@ -91,17 +91,34 @@ register_policy("replay", "replay a dataset's recorded actions on its own seeds"
                 needs_argument=True, cameras=())(lambda arg, env: ReplayPolicy(arg, env))
 
 
-def checkpoint_obs_type(arg: str | None) -> str:
-    """The env observation a learned policy's checkpoint reads, from its config.json (no torch
-    import): the state observation for one trained with observation "state", else pixels. An
-    unreadable checkpoint reads pixels here; building the policy then says what is wrong."""
+def _checkpoint_config(arg: str | None) -> dict[str, Any] | None:
+    """The policy config in a learned policy's checkpoint (``CKPT[?options]``), read from its
+    config.json without importing torch; None if unreadable: building the policy then says
+    what is wrong."""
     try:
         config = json.loads((Path((arg or "").partition("?")[0]) / "config.json").read_text())
-        state = config["config"].get("observation") == "state"
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        state = False
+        return config["config"] if isinstance(config["config"], dict) else None
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def checkpoint_obs_type(arg: str | None) -> str:
+    """The env observation a learned policy's checkpoint reads: the state observation for one
+    trained with observation "state", else pixels (an unreadable checkpoint too)."""
+    state = (_checkpoint_config(arg) or {}).get("observation") == "state"
     # rmbench.make's obs_type values (rmbench.envs.env.OBS_TYPES)
     return "environment_state_agent_pos" if state else "pixels_agent_pos"
+
+
+def checkpoint_cameras(arg: str | None) -> tuple[str, ...] | None:
+    """The cameras a learned policy's checkpoint reads: none for one trained on the state,
+    else those of its config (None, the default three, where it names none or is unreadable:
+    the config's own default)."""
+    config = _checkpoint_config(arg) or {}
+    if config.get("observation") == "state":
+        return ()
+    cameras = config.get("cameras")
+    return tuple(cameras) if isinstance(cameras, list | tuple) and cameras else None
 
 
 def _mem0(arg, env):
@@ -117,7 +134,7 @@ def _mem0_reads_simulator(arg: str | None) -> bool:
 
 
 register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&execute=N&flow_steps=N]",
-                needs_argument=True, obs_type=checkpoint_obs_type,
+                needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
                 reads_simulator=_mem0_reads_simulator)(_mem0)
 
 
@@ -134,6 +151,6 @@ def _act(arg, env):
 
 
 register_policy("dp", "Diffusion Policy from a checkpoint: dp:CKPT[?execute=N&ddim_steps=N]",
-                needs_argument=True, obs_type=checkpoint_obs_type)(_dp)
+                needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras)(_dp)
 register_policy("act", "ACT from a checkpoint: act:CKPT[?temporal_ensemble=M&execute=N]",
-                needs_argument=True, obs_type=checkpoint_obs_type)(_act)
+                needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras)(_act)

@@ -133,13 +133,17 @@ class FeatureFrames(torch.utils.data.Dataset):
         return len(self.frames)
 
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
-        item = self.frames[i]
-        k, t = self.frames.locate(int(i))
-        seen = self.frames.observed(t)
+        return {key: value[0] for key, value in self.batch([i]).items()}
+
+    def batch(self, indices: list[int]) -> dict[str, torch.Tensor]:
+        """The items at ``indices``, collated (``DemoDataset.batch``)."""
+        batch = self.frames.batch(indices)
+        k, t = self.frames.locate_many(indices)
         for cam in self.cameras:
-            array = self.cache.features(self.frames.episode_ids[k], cam)[seen]
-            item[features_key(cam)] = torch.from_numpy(np.array(array))
-        return item
+            batch[features_key(cam)] = torch.from_numpy(np.stack([
+                self.cache.features(self.frames.episode_ids[j], cam)[self.frames.observed(int(f))]
+                for j, f in zip(k, t, strict=True)]))
+        return batch
 
 
 def with_features(frames: DemoDataset, ds: Dataset, cfg) -> torch.utils.data.Dataset:

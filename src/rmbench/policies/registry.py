@@ -2,6 +2,12 @@
 mapped to factories. New policies register here and every command that takes ``--policy``
 can run them.
 
+A registration is the one place that says what a policy reads: ``obs_type`` (the observation)
+and ``cameras`` (the images; ``()``: none, so its env renders nothing), each fixed or computed
+from the argument (a checkpoint's config.json). The env is built from them before the policy
+(``env_options``), and a policy server announces them to its clients; the policy object
+carries no camera list of its own (``make_policy`` refuses one that disagrees).
+
 The modules that register policies are named in the ``rmbench.policies`` entry-point group
 (pyproject.toml: the built-in policies, and the ``remote:`` client in serve/) and imported on
 first use. They import this module, never the other way round, so the registry stays below
@@ -22,6 +28,8 @@ from rmbench.policies.base import Policy
 PolicyFactory = Callable[[str | None, object], Policy]
 # argument or None -> the env observation the policy reads (rmbench.make's obs_type)
 ObsType = Callable[[str | None], str]
+# the cameras whose images the policy reads: None = the station's default set, () = none
+Cameras = tuple[str, ...] | None
 PIXELS_OBS_TYPE = "pixels_agent_pos"  # rmbench.make's default
 
 
@@ -35,8 +43,9 @@ class PolicyEntry:
     factory: PolicyFactory
     help: str
     needs_argument: bool = False
-    # cameras the policy reads: None = the station's default set, () = none (no rendering)
-    cameras: tuple[str, ...] | None = None
+    # the cameras it reads (None: the station's default set, (): none, nothing is rendered),
+    # or a function of its argument giving them (a checkpoint names the ones it was trained on)
+    cameras: Cameras | Callable[[str | None], Cameras] = None
     # the observation it reads, from its argument (a checkpoint trained on the state reads
     # "environment_state_agent_pos"); None = pixels_agent_pos
     obs_type: ObsType | None = None
@@ -52,13 +61,15 @@ POLICIES: dict[str, PolicyEntry] = {}
 
 
 def register_policy(name: str, help: str, needs_argument: bool = False,
-                    cameras: tuple[str, ...] | None = None, obs_type: ObsType | None = None,
+                    cameras: Cameras | Callable[[str | None], Cameras] = None,
+                    obs_type: ObsType | None = None,
                     reads_simulator: Callable[[str | None], bool] | None = None,
                     env_options: Callable[[str | None], dict[str, Any]] | None = None):
     def wrap(factory: PolicyFactory) -> PolicyFactory:
         if name in POLICIES:
             raise ValueError(f"policy {name!r} is already registered")
-        POLICIES[name] = PolicyEntry(name, factory, help, needs_argument, cameras, obs_type,
+        fixed = tuple(cameras) if cameras is not None and not callable(cameras) else cameras
+        POLICIES[name] = PolicyEntry(name, factory, help, needs_argument, fixed, obs_type,
                                      reads_simulator, env_options)
         return factory
 
@@ -90,14 +101,44 @@ def env_options(spec: str) -> dict[str, Any]:
     declares (``obs_type``) and the cameras it reads; nothing is rendered for a policy that
     reads no camera."""
     entry, arg = parse_spec(spec)
+    return _env_options(entry, arg)
+
+
+def _env_options(entry: PolicyEntry, arg: str | None) -> dict[str, Any]:
     if entry.env_options is not None:
         return entry.env_options(arg)
     obs_type = entry.obs_type(arg) if entry.obs_type is not None else PIXELS_OBS_TYPE
-    if obs_type != PIXELS_OBS_TYPE:
-        return {"obs_type": obs_type}
-    if entry.cameras == ():
-        return {"render": False}
-    return {"cameras": entry.cameras} if entry.cameras else {}
+    options: dict[str, Any] = {} if obs_type == PIXELS_OBS_TYPE else {"obs_type": obs_type}
+    if not obs_type.startswith("pixels"):
+        return options
+    cameras = entry.cameras(arg) if callable(entry.cameras) else entry.cameras
+    if cameras is not None and not cameras:
+        return {**options, "render": False}
+    return {**options, "cameras": tuple(cameras)} if cameras else options
+
+
+def _cameras_of(options: dict[str, Any]) -> tuple[str, ...]:
+    """The cameras an env made with ``options`` renders into its observations."""
+    if options.get("render") is False or not options.get("obs_type", PIXELS_OBS_TYPE).startswith(
+            "pixels"):
+        return ()
+    if options.get("cameras") is not None:
+        return tuple(options["cameras"])
+    from rmbench.sim.station import DEFAULT_CAMERAS  # the env's default; mujoco on demand
+
+    return tuple(DEFAULT_CAMERAS)
+
+
+def policy_cameras(spec: str) -> tuple[str, ...]:
+    """The cameras whose images the policy ``spec`` reads, as its env renders them (``()``:
+    none)."""
+    return _cameras_of(env_options(spec))
+
+
+def registered_policies() -> list[PolicyEntry]:
+    """Every registered policy, those of the entry-point group's plugins included."""
+    _load_plugins()
+    return list(POLICIES.values())
 
 
 def reads_simulator(spec: str) -> bool:
@@ -107,9 +148,24 @@ def reads_simulator(spec: str) -> bool:
 
 
 def make_policy(spec: str, env) -> Policy:
-    """The policy named by ``spec``, for episodes of ``env`` (the expert reads its state)."""
+    """The policy named by ``spec``, for episodes of ``env`` (the expert reads its state).
+
+    What a policy reads is its registration's to say, since the env is built before the
+    policy: an object that still carries a ``cameras`` attribute disagreeing with it (a
+    class attribute ``cameras = ()`` beside a registration that renders the default cameras)
+    is refused rather than left to render what it never reads."""
     entry, arg = parse_spec(spec)
-    return entry.factory(arg, env)
+    policy = entry.factory(arg, env)
+    carried = getattr(policy, "cameras", None)
+    if carried is not None:
+        registered = _cameras_of(_env_options(entry, arg))
+        if set(carried) != set(registered):
+            getattr(policy, "close", lambda: None)()
+            raise ValueError(
+                f"policy {entry.name!r} carries cameras={tuple(carried)!r} but is registered to "
+                f"read {registered!r}: say what it reads in register_policy({entry.name!r}, "
+                f"cameras=...) and drop the attribute")
+    return policy
 
 
 ENTRY_POINT_GROUP = "rmbench.policies"

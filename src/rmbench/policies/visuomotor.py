@@ -7,8 +7,9 @@ A model here implements
                                              ``inputs`` the per-camera images (with a
                                              frozen backbone their feature maps), or with
                                              observation "state" [environment_state, state]
-    ``predict(window, state, generator) -> (B, H, A)``   normalised action chunk from the last
-                                                         ``obs_steps`` features, oldest first
+    ``predict(window, state, generators) -> (B, H, A)``   normalised action chunk from the
+                                      last ``obs_steps`` features, oldest first; row i's noise
+                                      (where it samples) from ``generators[i]``
 and holds ``encoders`` (its CNNs or backbone heads, or the state MLP) and ``normalizer``; it
 is built as ``model_cls(cfg, state_dim)`` (``state_dim`` the environment state's length, 0 for
 pixels).
@@ -241,11 +242,28 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
                  config_defaults=type(cfg)().to_dict())
 
 
+class _Slot:
+    """One episode's state: its sampling generator (seeded from the task seed), its window of
+    encoded steps, the chunk being executed, its step count and what the subclass adds."""
+
+    def __init__(self, seed: int = 0):
+        self.generator = torch.Generator().manual_seed(seed)
+        self.window: list[torch.Tensor] = []
+        self.queue: list[np.ndarray] = []
+        self.t = 0
+
+
 class VisuomotorPolicy(BasePolicy):
     """The closed loop: encode each step's observation once, keep the last ``obs_steps``
     (the first repeated at an episode's start, as in training), predict a chunk when the last
     one's ``execute`` actions are used up. Subclasses set ``name``, ``config_cls`` and
-    ``model_cls``, and may override ``schedule`` (ACT's temporal ensembling)."""
+    ``model_cls``, and may override ``due`` and ``take`` (ACT's temporal ensembling).
+
+    Several episodes side by side through ``reset_batch``/``act_batch`` (policies/base.py):
+    each step encodes every slot's observation in one call and predicts the chunks the slots
+    need in one call, always over all B rows (idle rows copy a live one), each slot's noise
+    from its own generator, so an episode's actions do not depend on the others in its batch.
+    One episode alone (``reset``/``act``) is a batch of one."""
 
     name: ClassVar[str]
     config_cls: ClassVar[type]
@@ -272,24 +290,73 @@ class VisuomotorPolicy(BasePolicy):
 
     def _setup(self, model: nn.Module, describe: dict[str, Any]) -> None:
         self.model, self.cfg, self.describe = model.eval(), model.cfg, describe
-        # the cameras it reads: none for a state checkpoint (its env need not render)
-        self.cameras = () if self.cfg.reads_state else self.cfg.cameras
+        self.slots: list[_Slot] = []
         self.reset("", {})
 
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
-        self.generator = torch.Generator().manual_seed(int(task_info.get("seed", 0)))
-        self.window: list[Any] = []
-        self.queue: list[np.ndarray] = []
-        self.t = 0
+        """One episode: a batch of one slot."""
+        self.slots = []
+        self.reset_batch(0, instruction, task_info)
+
+    def reset_batch(self, slot: int, instruction: str, task_info: dict[str, Any],
+                    env=None) -> None:
+        """A new episode in ``slot``."""
+        self.slots += [self.new_slot() for _ in range(slot + 1 - len(self.slots))]
+        self.slots[slot] = self.new_slot(int(task_info.get("seed", 0)))
+
+    def new_slot(self, seed: int = 0) -> _Slot:
+        return _Slot(seed)
+
+    def act(self, observation: dict[str, Any]) -> np.ndarray:
+        """One control step: the observation in, the next 14-d joint target out."""
+        return self.act_batch([observation])[0]
 
     @inference
-    def act(self, observation: dict[str, Any]) -> np.ndarray:
-        state = state_tensor(observation)
-        features = self.model.observe(self.inputs(observation), state)
-        self.window = (self.window or [features] * self.cfg.obs_steps)[1:] + [features]
-        action = self.schedule(state)
-        self.t += 1
-        return action
+    def act_batch(self, observations: list[dict[str, Any] | None]) -> list[np.ndarray | None]:
+        """One control step of every slot whose observation is given (``act``'s, per slot),
+        the network run over ``len(observations)`` rows."""
+        n = len(observations)
+        live = [i for i, o in enumerate(observations) if o is not None]
+        if not live:
+            return [None] * n
+        self.slots += [self.new_slot() for _ in range(n - len(self.slots))]
+        rows = [o if o is not None else observations[live[0]] for o in observations]
+        per_row = [self.inputs(o) for o in rows]
+        state = torch.cat([state_tensor(o) for o in rows])
+        features = self.model.observe([torch.cat(x) for x in zip(*per_row, strict=True)], state)
+        for i in live:
+            s = self.slots[i]
+            s.window = (s.window or [features[i:i + 1]] * self.cfg.obs_steps)[1:] + [features[i:i + 1]]
+        due = [i for i in live if self.due(self.slots[i])]
+        chunks = self.chunks(state, due) if due else {}
+        actions: list[np.ndarray | None] = [None] * n
+        for i in live:
+            actions[i] = self.take(self.slots[i], chunks.get(i))
+            self.slots[i].t += 1
+        return actions
+
+    def chunks(self, state: torch.Tensor, due: list[int]) -> dict[int, np.ndarray]:
+        """A new chunk (H, 14) of absolute joint targets from each ``due`` slot's window, every
+        row through the model at once (a row not due reads the first due slot's window and
+        draws no noise)."""
+        windows = [self.slots[i].window if i in due else self.slots[due[0]].window
+                   for i in range(len(state))]
+        window = [torch.cat(step) for step in zip(*windows, strict=True)]
+        generators = [self.slots[i].generator if i in due else None for i in range(len(state))]
+        normalised = self.model.predict(window, state, generators)
+        actions = self.model.normalizer.unaction(normalised, state)
+        return {i: actions[i].double().numpy() for i in due}
+
+    def due(self, slot: _Slot) -> bool:
+        """Whether ``slot`` needs a new chunk at this step."""
+        return not slot.queue
+
+    def take(self, slot: _Slot, chunk: np.ndarray | None) -> np.ndarray:
+        """The step's action for ``slot``, given the chunk predicted for it now (None if
+        none was due)."""
+        if chunk is not None:
+            slot.queue = list(chunk[:self.cfg.execute])
+        return slot.queue.pop(0)
 
     def inputs(self, observation: dict[str, Any]) -> list[torch.Tensor]:
         """What ``model.observe`` encodes: one image (or its frozen backbone's feature map)
@@ -298,13 +365,3 @@ class VisuomotorPolicy(BasePolicy):
         if self.cfg.reads_state:
             return state_inputs(observation, self.model.encoders.state_dim)
         return camera_inputs(observation, self.cfg)
-
-    def chunk(self, state: torch.Tensor) -> np.ndarray:
-        """A new chunk (H, 14) of absolute joint targets from the current window."""
-        normalised = self.model.predict(self.window, state, self.generator)
-        return self.model.normalizer.unaction(normalised, state)[0].double().numpy()
-
-    def schedule(self, state: torch.Tensor) -> np.ndarray:
-        if not self.queue:
-            self.queue = list(self.chunk(state)[:self.cfg.execute])
-        return self.queue.pop(0)

@@ -8,6 +8,12 @@ first N actions of each returned chunk before asking again (openpi's ALOHA examp
 after 10 to 25 of the 50). An rmbench server's greeting also says what its policy reads (the
 observation type, the cameras): evaluation builds the env from it (``remote_env_options``),
 and the client sends only those entries.
+
+An rmbench server whose greeting announces ``batch`` slots (its policy has the batched form)
+gets a ``BatchedRemotePolicy``: it has ``reset_batch``/``act_batch`` too, so evaluation asks it
+once per step for every episode of a worker's batch, in one request. Any other server gets a
+``RemotePolicy``, which has no ``act_batch``: evaluation plays it one episode at a time, as the
+server does.
 """
 
 from __future__ import annotations
@@ -83,14 +89,21 @@ class RemotePolicy(BasePolicy):
             raise RuntimeError(f"{self.url} now serves another policy than at the first "
                                f"connection ({metadata!r:.200})")
         self.metadata, self.adapter = metadata, adapter
-        self.cameras = (tuple(metadata.get("cameras", ())) if adapter == "rmbench"
-                        else tuple(openpi.CAMERA_KEYS))
+        # the slots the server serves side by side on a connection (0: one episode at a time)
+        batch = metadata.get("batch") if adapter == "rmbench" else 0
+        self.served_slots = batch if type(batch) is int and batch > 0 else 0
+        # the cameras the served policy reads, which the observations sent carry
+        self.served_cameras = (tuple(metadata.get("cameras", ())) if adapter == "rmbench"
+                               else tuple(openpi.CAMERA_KEYS))
         self.episode_open = False  # a reset on this connection starts the episode
+        self.open_slots: set[int] = set()  # and a slot reset starts that slot's
+        self.statuses: dict[int, dict[str, Any]] = {}  # each slot's last status from the server
 
     def _disconnect(self) -> None:
         self._stack.close()
         self._stack = ExitStack()
         self.ws = None
+        self.episode_open, self.open_slots = False, set()  # the server dropped them
 
     def _call(self, msg: dict[str, Any]) -> Any:
         if self.ws is None:
@@ -110,7 +123,8 @@ class RemotePolicy(BasePolicy):
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
         self.prompt = instruction
         if self.adapter == "rmbench":
-            self.episode_open = False
+            # the server ends the slots' episodes too, as they share the policy's state
+            self.episode_open, self.open_slots = False, set()
             self._rmbench_reply(self._call(
                 {"reset": True, "instruction": instruction, "task_info": task_info}))
             self.episode_open = True
@@ -123,6 +137,10 @@ class RemotePolicy(BasePolicy):
             raise RuntimeError(f"{self.url}: the connection was lost in this episode; the "
                                f"next reset reconnects")
         actions = np.asarray(self._rmbench_reply(self._call(self._served(observation)))["actions"])
+        return self._cut(actions)
+
+    def _cut(self, actions: np.ndarray) -> np.ndarray:
+        """The first ``steps`` actions of a chunk (``?steps=N``)."""
         return actions[: self.steps] if actions.ndim == 2 else actions
 
     def _served(self, observation: dict[str, Any]) -> dict[str, Any]:
@@ -130,9 +148,9 @@ class RemotePolicy(BasePolicy):
         out = {"agent_pos": observation["agent_pos"]}
         if self.metadata.get("state_dim") is not None:
             out["environment_state"] = observation.get("environment_state")
-        if self.cameras:
+        if self.served_cameras:
             pixels = observation.get("pixels") or {}
-            out["pixels"] = {cam: pixels.get(cam) for cam in self.cameras}
+            out["pixels"] = {cam: pixels.get(cam) for cam in self.served_cameras}
         return out
 
     def _rmbench_reply(self, reply: Any) -> dict[str, Any]:
@@ -149,8 +167,8 @@ class RemotePolicy(BasePolicy):
         obs_type = self.metadata.get("obs_type", "pixels_agent_pos")
         if not obs_type.startswith("pixels"):
             return {"obs_type": obs_type}
-        return {"obs_type": obs_type, "cameras": self.cameras} if self.cameras else {
-            "obs_type": obs_type, "render": False}
+        return ({"obs_type": obs_type, "cameras": self.served_cameras} if self.served_cameras
+                else {"obs_type": obs_type, "render": False})
 
     def close(self) -> None:
         self._disconnect()
@@ -166,7 +184,7 @@ def remote_env_options(arg: str | None) -> dict[str, Any]:
 
 
 def _remote(arg: str | None, env) -> RemotePolicy:
-    policy = RemotePolicy(arg or "")
+    policy = open_remote(arg or "")
     if env is not None and policy.adapter == "rmbench":
         u = env.unwrapped
         task = type(u.task).name
@@ -177,6 +195,72 @@ def _remote(arg: str | None, env) -> RemotePolicy:
             policy.close()
             raise ValueError(f"{policy.url} reads environment_state: make the env with "
                              f"obs_type={policy.metadata.get('obs_type')!r}")
+    return policy
+
+
+class BatchedRemotePolicy(RemotePolicy):
+    """A ``RemotePolicy`` whose server announced ``served_slots`` slots: the batched form of the
+    interface (policies/base.py), one request per step for every slot. A slot that lost its
+    episode to a broken connection gets that error as its answer (ending its episode only);
+    an error reply for the whole batch, or a broken connection, raises (ending every episode
+    asked). The next slot reset connects again."""
+
+    def reset_batch(self, slot: int, instruction: str, task_info: dict[str, Any],
+                    env: Any = None) -> None:
+        if not 0 <= slot < self.served_slots:
+            raise ValueError(f"{self.url} serves {self.served_slots} slots, not slot {slot}")
+        self.episode_open = False  # the server ends a single episode at a slot reset
+        self.open_slots.discard(slot)
+        self.statuses.pop(slot, None)
+        self._rmbench_reply(self._call({"reset": True, "slot": slot, "instruction": instruction,
+                                        "task_info": task_info}))
+        self.open_slots.add(slot)
+
+    def act_batch(self, observations: list[dict[str, Any] | None]) -> list[Any]:
+        n = len(observations)
+        if not 1 <= n <= self.served_slots:
+            raise ValueError(f"{self.url} serves batches of 1 to {self.served_slots} slots, "
+                             f"got {n}")
+        asked = [i for i, o in enumerate(observations) if o is not None]
+        lost = [i for i in asked if i not in self.open_slots]
+        answers: list[Any] = [None] * n
+        for i in lost:
+            answers[i] = RuntimeError(f"{self.url}: the connection was lost in this episode; "
+                                      f"the next reset reconnects")
+        if len(lost) == len(asked):
+            return answers
+        batch = [self._served(o) if o is not None and i not in lost else None
+                 for i, o in enumerate(observations)]
+        reply = self._rmbench_reply(self._call({"batch": batch}))
+        actions = reply.get("actions")
+        errors, statuses = reply.get("errors") or [None] * n, reply.get("status") or [None] * n
+        if not all(isinstance(x, list) and len(x) == n for x in (actions, errors, statuses)):
+            raise RuntimeError(f"server answered a batch of {n} with {actions!r:.80}")
+        for i, o in enumerate(batch):
+            if o is None:
+                continue
+            if errors[i] is not None:
+                answers[i] = RuntimeError(f"server: {errors[i]}")
+            else:
+                answers[i] = self._cut(np.asarray(actions[i]))
+                if isinstance(statuses[i], dict):
+                    self.statuses[i] = statuses[i]
+        return answers
+
+    def status_batch(self, slot: int) -> dict[str, Any]:
+        """What the served policy reported of ``slot`` with its last answer (its
+        ``status_batch``; empty where it reports none)."""
+        return self.statuses.get(slot, {})
+
+
+def open_remote(url: str, timeout: float = 60.0) -> RemotePolicy:
+    """The client for the server at ``url``: a ``BatchedRemotePolicy`` where the greeting
+    announces slots, else a ``RemotePolicy`` (which has no ``act_batch``, so evaluation never
+    takes it for a batched policy)."""
+    policy = RemotePolicy(url, timeout)
+    if policy.served_slots:
+        # the same connection and state, with the batched methods the greeting allows
+        policy.__class__ = BatchedRemotePolicy
     return policy
 
 

@@ -6,6 +6,12 @@ An observation may hold exactly the entries the policy reads: ``agent_pos`` floa
 ``frame_max``; ``environment_state`` float (D,) with D the task's state length. The largest
 such message sizes the websocket's message cap. A reset may hold an instruction and the
 task's facts, of the types the environment gives them.
+
+A policy with the batched form (policies/base.py) is served ``batch`` slots per connection:
+a batch message holds up to ``batch`` observations, each checked as a single one, so the cap
+is the largest observation times the slots. The slots announced are at most ``MAX_SLOTS`` and
+fewer where that product would pass ``MAX_BATCH_BYTES`` (large ``frame_max``), so the cap a
+client can make the server read stays bounded whatever the frames.
 """
 
 from __future__ import annotations
@@ -21,6 +27,10 @@ from rmbench.sim.simulator import ACTION_DIM
 FRAME_MAX = (480, 640)  # (H, W): VGA, twice the env's default 240x320
 MAX_TEXT = 4096  # an instruction, a subtask's name
 ENVELOPE_BYTES = 64 * 2**10  # keys, headers and a reset's task facts around the arrays
+MAX_SLOTS = 64  # episodes side by side on one connection of a batched policy
+MAX_BATCH_BYTES = 256 * 2**20  # a batch message's cap never passes this
+ENTRY_BYTES = 2 * 2**10  # an observation's keys and array headers inside a batch
+ENTRY_ITEMS = 256  # values one observation of a batch may hold (a full one holds ~80)
 # the task facts a reset may carry (run_policy_episode's task_info) and their types
 TASK_INFO = {"task": str, "gym_id": str, "tmc": str, "step_limit": int, "subtasks": list,
              "seed": int, "instruction": str}
@@ -33,27 +43,70 @@ class Contract:
     cameras: tuple[str, ...]
     state_dim: int | None  # None: the policy reads no environment_state
     frame_max: tuple[int, int] = FRAME_MAX
+    batch: int = 0  # slots per connection; 0: the policy plays one episode at a time
 
     def __post_init__(self):
         if len(self.frame_max) != 2 or min(self.frame_max) < 1:
             raise ValueError(f"frame_max must be (H, W) >= 1, got {self.frame_max}")
+        if not 0 <= self.batch <= MAX_SLOTS:
+            raise ValueError(f"batch must be in [0, {MAX_SLOTS}], got {self.batch}")
+
+    @property
+    def observation_bytes(self) -> int:
+        """The arrays of the largest legal observation: every camera's frame at
+        ``frame_max`` and the states as float64."""
+        h, w = self.frame_max
+        return len(self.cameras) * h * w * 3 + 8 * (ACTION_DIM + (self.state_dim or 0))
 
     @property
     def max_message_bytes(self) -> int:
-        """The largest legal message: every camera's frame at ``frame_max``, the states, and
-        room for the keys, headers and a reset's facts."""
-        h, w = self.frame_max
-        return (len(self.cameras) * h * w * 3 + 8 * (ACTION_DIM + (self.state_dim or 0))
-                + ENVELOPE_BYTES)
+        """The largest legal message: one observation and room for the keys, headers and a
+        reset's facts; for a batched policy, ``batch`` observations with their headers."""
+        if self.batch:
+            return self.batch * (self.observation_bytes + ENTRY_BYTES) + ENVELOPE_BYTES
+        return self.observation_bytes + ENVELOPE_BYTES
 
     @property
     def limits(self) -> Limits:
+        if self.batch:  # one more level: the batch's list
+            return Limits(bytes=self.max_message_bytes, items=1024 + ENTRY_ITEMS * self.batch,
+                          depth=7, text=MAX_TEXT)
         return Limits(bytes=self.max_message_bytes, items=1024, depth=6, text=MAX_TEXT)
 
     def greeting(self) -> dict[str, Any]:
         return {"obs_type": self.obs_type, "cameras": list(self.cameras),
                 "frame_max": list(self.frame_max), "state_dim": self.state_dim,
-                "max_message_bytes": self.max_message_bytes}
+                "max_message_bytes": self.max_message_bytes, "batch": self.batch}
+
+    def slots_for(self, wanted: int = MAX_SLOTS) -> int:
+        """The slots to announce for a batched policy: ``wanted``, fewer where a batch of
+        the largest observations would pass ``MAX_BATCH_BYTES``, and at least one."""
+        each = self.observation_bytes + ENTRY_BYTES
+        return max(1, min(wanted, MAX_SLOTS, (MAX_BATCH_BYTES - ENVELOPE_BYTES) // each))
+
+    def check_slot(self, slot) -> int:
+        """A slot index of this connection, or a WireError."""
+        if type(slot) is not int or not 0 <= slot < self.batch:
+            raise WireError(f"slot must be an integer in [0, {self.batch}), got {slot!r:.40}")
+        return slot
+
+    def check_batch(self, batch) -> list[dict[str, Any] | None]:
+        """A batch message's list: 1 to ``batch`` entries, each None or an observation that
+        ``check_observation`` accepts; else a WireError naming the entry."""
+        if not isinstance(batch, list) or not 1 <= len(batch) <= self.batch:
+            what = f"{len(batch)} entries" if isinstance(batch, list) else type(batch).__name__
+            raise WireError(f"batch must be a list of 1 to {self.batch} entries, got {what}")
+        for i, obs in enumerate(batch):
+            if obs is None:
+                continue
+            if not isinstance(obs, dict):
+                raise WireError(f"batch entry {i}: an observation must be a map or nil, got "
+                                f"{type(obs).__name__}")
+            try:
+                self.check_observation(obs)
+            except WireError as err:
+                raise WireError(f"batch entry {i}: {err}") from None
+        return batch
 
     def check_observation(self, msg: dict) -> dict[str, Any]:
         """``msg`` if it holds what the policy reads and nothing else, else a WireError."""

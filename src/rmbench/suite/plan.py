@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.envs.noise import NoiseSpec
+from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered
 from rmbench.training.device import check_device
@@ -178,33 +179,67 @@ def memory_of(spec: str, tmc: str, cfg) -> str:
     return " + ".join(parts) or "current step only"
 
 
-def add_recipe_arguments(parser) -> None:
+# Plan's recipe fields when nothing says otherwise (benchmarks/learning.py starts from these).
+GENERIC = {"demos": 50, "steps": 3000, "batch": 32, "episodes": 100, "noise": 0.0,
+           "noise_kind": "white", "sets": (), "rendered_copies": 0, "rendered_reach": 0.04}
+# The recipe each observation's table is made with, what ``rmbench table --obs OBS`` uses
+# unless an option says otherwise (``--set`` items are added after the recipe's: a later item
+# for the same field wins). The state table's (docs/results/benchmark_state.md): 50
+# demonstrations with DART noise, 18,000 steps at batch 128, Mem-0's head and chunk
+# settings, 2 cm of noise on the mats' positions, the grasp poses as input, 16 layout copies.
+# Mem-0's two M(n) settings (the event end classifier, the 12-frame key delay) are its
+# config's defaults.
+RECIPES = {
+    "state": {**GENERIC, "steps": 18000, "batch": 128, "noise": 0.02, "sets": (
+        "mem0.head_layers=2", "mem0.execute=20", "relative_actions=false",
+        "mem0.action_patch=3", "state_noise=0.02", 'state_noise_on=["mat_"]',
+        "grasp_pose_input=true", "layout_copies=16", "layout_shift=0.04",
+        "mem0.sample_noise=0")},
+    "pixels": GENERIC,
+}
+
+
+def add_recipe_arguments(parser, defaults: str = "generic") -> None:
     """The command-line options of a table's recipe (``Plan``'s fields beyond its tasks and
-    columns), shared by ``rmbench table`` and benchmarks/learning.py."""
-    parser.add_argument("--demos", type=int, default=50)
-    parser.add_argument("--steps", type=int, default=3000)
-    parser.add_argument("--batch", type=int, default=32)
-    parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument("--noise", type=float, default=0.0,
-                        help="action noise executed during collection (DART), radians")
-    parser.add_argument("--noise-kind", choices=("white", "smooth"), default="white")
+    columns), shared by ``rmbench table`` and benchmarks/learning.py; an option left out takes
+    its value from ``recipe_of``'s defaults (``defaults`` says which, for the help)."""
+    where = ("the --obs recipe's (rmbench.suite.plan.RECIPES)" if defaults == "recipe"
+             else "default")
+    parser.add_argument("--demos", type=int, help=f"demonstrations per task ({where}: 50)")
+    parser.add_argument("--steps", type=int, help=f"training steps ({where})")
+    parser.add_argument("--batch", type=int, help=f"training batch size ({where})")
+    parser.add_argument("--episodes", type=int, help=f"evaluation episodes per cell ({where}: 100)")
+    parser.add_argument("--noise", type=float,
+                        help=f"action noise executed during collection (DART), radians ({where})")
+    parser.add_argument("--noise-kind", choices=("white", "smooth"),
+                        help=f"({where}: white)")
     parser.add_argument("--set", action="append", default=[], metavar="[POLICY.]FIELD=VALUE",
                         help="override every policy config that has the field, or POLICY's "
-                             "alone (mem0.execute=20); VALUE as JSON; repeatable")
-    parser.add_argument("--rendered-copies", type=int, default=0, metavar="N",
+                             "alone (mem0.execute=20); VALUE as JSON; repeatable; added after "
+                             f"the {where} items")
+    parser.add_argument("--rendered-copies", type=int, metavar="N",
                         help="train on each demonstration and N rendered copies of it with the "
                              "scene moved (`rmbench dataset copy-layouts`; the pixel track's "
                              "counterpart of --set layout_copies)")
-    parser.add_argument("--rendered-reach", type=float, default=0.04, metavar="METRES",
-                        help="with --rendered-copies: the largest move along each table axis")
+    parser.add_argument("--rendered-reach", type=float, metavar="METRES",
+                        help="with --rendered-copies: the largest move along each table axis "
+                             "(default 0.04)")
 
 
-def recipe_of(args) -> dict[str, Any]:
-    """``Plan``'s recipe fields from the options ``add_recipe_arguments`` added."""
-    return {"demos": args.demos, "steps": args.steps, "batch": args.batch,
-            "episodes": args.episodes, "noise": args.noise, "noise_kind": args.noise_kind,
-            "sets": tuple(args.set), "rendered_copies": args.rendered_copies,
-            "rendered_reach": args.rendered_reach}
+def recipe_of(args, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
+    """``Plan``'s recipe fields from the options ``add_recipe_arguments`` added, each option
+    left out taken from ``defaults`` (``GENERIC`` unless given; ``RECIPES[obs]`` for a
+    table), its ``--set`` items after those of the defaults' that set other fields."""
+    base = GENERIC if defaults is None else defaults
+    given = {"demos": args.demos, "steps": args.steps, "batch": args.batch,
+             "episodes": args.episodes, "noise": args.noise, "noise_kind": args.noise_kind,
+             "rendered_copies": args.rendered_copies, "rendered_reach": args.rendered_reach}
+    recipe = {k: base[k] if v is None else v for k, v in given.items()}
+    # a recipe item whose field an option sets again gives way to it, so that a command that
+    # spells the whole recipe out names the folders it always named
+    mine = {_target(item) for item in args.set}
+    kept = tuple(item for item in base["sets"] if _target(item) not in mine)
+    return {**recipe, "sets": kept + tuple(args.set)}
 
 
 @dataclass(frozen=True)
@@ -237,6 +272,9 @@ class Plan:
     train on the demonstrations and these copies, each scene moved by up to ``rendered_reach``
     metres in x and y. The state's ``--set layout_copies`` needs no rendering; pixels do."""
     rendered_reach: float = 0.04
+    split: str = "test"
+    """The evaluations' episodes: the test ones a table reports, or the validation ones a
+    recipe is chosen on (``rmbench.seeds``); validation cells have folders of their own."""
 
     def __post_init__(self):
         if self.obs not in OBSERVATIONS:
@@ -255,6 +293,8 @@ class Plan:
                                             and self.rendered_reach > 0):
             raise ValueError(f"rendered copies must be >= 0 and their reach a finite number "
                              f"> 0, got {self.rendered_copies} and {self.rendered_reach}")
+        if self.split not in SPLITS:
+            raise ValueError(f"split must be one of {', '.join(SPLITS)}, got {self.split!r}")
         NoiseSpec(self.noise_kind, self.noise)  # a bad kind or sigma: one line
         check_device(self.device)
         check_sets(self.sets)
@@ -291,7 +331,9 @@ class Plan:
 
     def eval_dir(self, out: Path, task: str, spec: str) -> Path:
         run = run_name(spec, self.steps, self.batch, self.sets)
-        return Path(out) / task / "eval" / bounded(f"{run}{self._copies_tag()}-e{self.episodes}")
+        split = "" if self.split == "test" else f"-{self.split}"
+        return Path(out) / task / "eval" / bounded(
+            f"{run}{self._copies_tag()}-e{self.episodes}{split}")
 
     def eval_policy(self, out: Path, task: str, spec: str) -> str:
         """The ``--policy`` argument of the cell's evaluation."""

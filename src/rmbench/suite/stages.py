@@ -228,7 +228,7 @@ def eval_stage(plan: Plan, out: Path, task: str, spec: str, workers: int = 1,
         t0 = time.perf_counter()
         summary = evaluate(EvalConfig((task,), plan.eval_policy(out, task, spec), folder,
                                       episodes=plan.episodes, workers=workers, video=plan.video,
-                                      progress=progress))
+                                      progress=progress, split=plan.split))
         add_time(folder, "eval_wall_s", time.perf_counter() - t0)
         result = summary["tasks"][task]
     return result

@@ -17,10 +17,10 @@ from typing import Any
 
 from rmbench.eval.chance import chance
 from rmbench.eval.intervals import difference, format_difference, outside_noise
+from rmbench.eval.published import ablation_names
 from rmbench.eval.report import PUBLISHED, Rate, format_cell, published_source, table
 from rmbench.machine import describe, short
 from rmbench.suite.plan import Plan, applies, split_seed
-from rmbench.suite.published import ablation_names
 from rmbench.suite.runner import column
 from rmbench.suite.stages import TIMING, cell_row, pooled_row, read_json
 from rmbench.tasks import get_task

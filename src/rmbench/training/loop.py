@@ -44,7 +44,7 @@ from tqdm import tqdm
 from rmbench.identity import differences
 from rmbench.machine import describe as describe_machine
 from rmbench.tasks.registry import recorded_gym_id
-from rmbench.training.device import check_device
+from rmbench.training.device import check_device, flush_denormals
 from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
@@ -170,12 +170,13 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     device = torch.device(f"cuda:{dist.local_rank}" if cfg.device == "cuda" else cfg.device)
     if device.type == "cuda" and not torch.cuda.is_available():
         raise TrainingError("--device cuda, but this torch has no CUDA device")
+    flush_denormals()
     torch.manual_seed(cfg.seed + dist.rank)
     model.to(device)
     groups = model.param_groups()
     opt = torch.optim.AdamW([{"params": g["params"], "lr": g["lr"], "name": g["name"],
                               "base_lr": g["lr"], "min_lr": g["min_lr"]} for g in groups],
-                            betas=(0.9, 0.999), weight_decay=cfg.weight_decay)
+                            betas=(0.9, 0.999), weight_decay=cfg.weight_decay, foreach=True)
     # as JSON stores it (tuples become lists), so that a resume compares like with like
     identity = json.loads(json.dumps({"describe": describe, "train": _run_fields(cfg),
                                       "world": dist.world}))
@@ -214,7 +215,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
             raise TrainingError(f"step {step}: loss is {loss.item()} (logs {logs})")
         opt.zero_grad(set_to_none=True)
         loss.backward()
-        grad_norm = torch.nn.utils.clip_grad_norm_(trained, cfg.grad_clip)
+        grad_norm = torch.nn.utils.clip_grad_norm_(trained, cfg.grad_clip, foreach=True)
         opt.step()
         if hasattr(model, "after_step"):
             model.after_step()

@@ -4,15 +4,12 @@ action the weighted mean of every chunk's prediction for it (of the last K steps
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
-import torch
 
 from rmbench.policies.act.config import ACTConfig
 from rmbench.policies.act.modeling import ACTModel, ACTTrainer
 from rmbench.policies.ensemble import TemporalEnsemble
-from rmbench.policies.visuomotor import VisuomotorPolicy, train_visuomotor
+from rmbench.policies.visuomotor import VisuomotorPolicy, _Slot, train_visuomotor
 
 
 class ACTPolicy(VisuomotorPolicy):
@@ -24,16 +21,20 @@ class ACTPolicy(VisuomotorPolicy):
     config_cls = ACTConfig
     model_cls = ACTModel
 
-    def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
-        super().reset(instruction, task_info)
-        self.ensemble = TemporalEnsemble(self.cfg.horizon, self.cfg.temporal_ensemble,
+    def new_slot(self, seed: int = 0) -> _Slot:
+        slot = super().new_slot(seed)
+        slot.ensemble = TemporalEnsemble(self.cfg.horizon, self.cfg.temporal_ensemble,
                                          self.cfg.ensemble_window)
+        return slot
 
-    def schedule(self, state: torch.Tensor) -> np.ndarray:
+    def due(self, slot: _Slot) -> bool:
+        return self.cfg.temporal_ensemble > 0 or super().due(slot)
+
+    def take(self, slot: _Slot, chunk: np.ndarray | None) -> np.ndarray:
         if self.cfg.temporal_ensemble <= 0:
-            return super().schedule(state)
-        self.ensemble.add(self.t, self.chunk(state))
-        return self.ensemble.action(self.t)
+            return super().take(slot, chunk)
+        slot.ensemble.add(slot.t, chunk)
+        return slot.ensemble.action(slot.t)
 
 
 def train_act(dataset, out, cfg: ACTConfig, train_cfg, progress: bool = True, workers: int = 0):

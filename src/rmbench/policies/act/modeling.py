@@ -93,9 +93,9 @@ class ACTModel(nn.Module):
         return self.action_out(self.decoder(queries, memory))
 
     def predict(self, window: list[torch.Tensor], state: torch.Tensor,
-                generator: torch.Generator | None) -> torch.Tensor:
+                generators: list[torch.Generator | None]) -> torch.Tensor:
         """The normalised chunk (B, k, 14) from the window's last step (ACT sees one) and the
-        raw joint state, with z = 0: deterministic, ``generator`` is not drawn from."""
+        raw joint state, with z = 0: deterministic, ``generators`` are not drawn from."""
         tokens = window[-1]
         z = torch.zeros(tokens.shape[0], self.cfg.latent_dim, device=tokens.device)
         return self.decode(tokens, state, z)

@@ -46,13 +46,16 @@ class DiffusionPolicyModel(nn.Module):
         return self.unet(x, k.float() / self.cfg.train_steps, cond)
 
     def predict(self, window: list[torch.Tensor], state: torch.Tensor,
-                generator: torch.Generator | None) -> torch.Tensor:
+                generators: list[torch.Generator | None]) -> torch.Tensor:
         """The normalised chunk (B, H, 14) sampled by DDIM, conditioned on the window's
-        features (oldest first); its starting noise comes from ``generator``."""
+        features (oldest first); row i's starting noise comes from ``generators[i]`` (zeros
+        for None: a row whose chunk is not used)."""
         cond = torch.cat(window, -1)
-        return self.schedule.ddim_sample(lambda x, k: self.noise(x, k, cond),
-                                         (cond.shape[0], self.cfg.horizon, ACTION_DIM),
-                                         self.cfg.ddim_steps, generator, cond.device)
+        row = (1, self.cfg.horizon, ACTION_DIM)
+        start = torch.cat([torch.randn(row, generator=g, device="cpu") if g is not None
+                           else torch.zeros(row) for g in generators])
+        return self.schedule.ddim_sample(lambda x, k: self.noise(x, k, cond), tuple(start.shape),
+                                         self.cfg.ddim_steps, None, cond.device, start)
 
 
 class DPTrainer(VisuomotorTrainer):

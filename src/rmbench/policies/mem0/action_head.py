@@ -60,11 +60,16 @@ class FlowMatchingHead(nn.Module):
 
     @torch.no_grad()
     def sample(self, cond: torch.Tensor, steps: int,
-               generator: torch.Generator | None = None, noise: float = 1.0) -> torch.Tensor:
-        """A chunk (B, H, A) integrated from ``noise`` times standard normal noise."""
+               generator: torch.Generator | None = None, noise: float = 1.0,
+               start: torch.Tensor | None = None) -> torch.Tensor:
+        """A chunk (B, H, A) integrated from ``noise`` times standard normal noise: drawn
+        from ``generator``, or ``start`` (B, H, A) drawn by the caller (a generator per row,
+        so that a row's chunk does not depend on the rows beside it)."""
         b = cond.shape[0]
-        x = torch.randn(b, self.horizon, self.action_dim, generator=generator,
-                        device="cpu").to(cond.device)
+        if start is None:
+            start = torch.randn(b, self.horizon, self.action_dim, generator=generator,
+                                device="cpu")
+        x = start.to(cond.device)
         if noise != 1.0:
             x = x * noise
         for i in range(steps):

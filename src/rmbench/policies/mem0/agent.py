@@ -8,6 +8,19 @@ ensembling, every few steps, averaged over the chunks that overlap); the end cla
 debounced verdict (or, with gt_classifier, the simulator's subtask boundary).
 When a subtask ends its text and end frame go to key memory and the planner names the next
 one. M(1) tasks run as one subtask, the goal: no planner, no classifier.
+
+Several episodes side by side (``act_batch``, policies/base.py): each slot keeps its own
+episode (memories as rows of one store, event window, debounce, planner state, subtask,
+chunk queue and a generator seeded from its task seed), and each step runs the encoder, the
+context, the end classifier and, when a slot needs a chunk, the action head once over all B
+slots, padded with copies of a live slot's observation to B rows. A float kernel may sum in
+another order for another row count, so the rows are always B; at a given B a row's numbers
+do not depend on what the other rows hold (tests/test_batched_eval.py checks it), so an
+episode's actions, and its record, are the same whichever episodes share its batch. The
+planner (rare: an episode's first step and each subtask end) runs per slot on one row. One
+episode alone (``reset``/``act``) is a batch of one, and gives the actions this policy gave
+before it had batches; at another B a row's numbers may differ from it in the last bits,
+which a closed loop can carry into another episode: compare evaluations at one batch size.
 """
 
 from __future__ import annotations
@@ -54,10 +67,51 @@ def load_mem0(path: str | Path, ablations: tuple[str, ...] = (),
     return model, cfg, describe
 
 
+class _Slot:
+    """One episode's state beside its rows of the policy's memory stores."""
+
+    def __init__(self, cfg: Mem0Config, goal: int, seed: int = 0, env=None):
+        self.generator = torch.Generator().manual_seed(seed)
+        self.env = env  # the simulator, for gt_classifier
+        self.debounce = Debounce(cfg.end_window)
+        self.t = 0
+        self.subtask_t = 0  # steps since the subtask began: the sliding window's phase
+        self.queue: list[np.ndarray] = []
+        self.ensemble = TemporalEnsemble(cfg.horizon, cfg.temporal_ensemble)
+        self.next_chunk_at = 0  # with temporal ensembling: the step the next chunk is due
+        self.first: torch.Tensor | None = None  # planner embedding of o_0
+        self.keys: list[tuple[int, torch.Tensor]] = []
+        self.subtask = goal
+        self.start_subtask = True
+        self.stage = 0
+        self.ends = 0  # subtask ends declared this episode (eval/boundaries.py reads them)
+
+
+def _first_slot(name: str) -> property:
+    """One episode's attribute, as ``reset``/``act`` play it: slot 0's."""
+    return property(lambda self: getattr(self.slots[0], name),
+                    lambda self, value: setattr(self.slots[0], name, value))
+
+
 class Mem0Policy(BasePolicy):
     """A Mem-0 checkpoint in the closed loop: each 20 Hz step's observation in, one 14-d joint
     target out. It keeps the memories across the episode and, on an M(n) task, the planner's
-    current subtask (``status()``), which moves on when the end classifier says it has ended."""
+    current subtask (``status()``), which moves on when the end classifier says it has ended.
+    Several episodes at once through ``reset_batch``/``act_batch`` (the module's docstring)."""
+
+    generator = _first_slot("generator")
+    debounce = _first_slot("debounce")
+    t = _first_slot("t")
+    subtask_t = _first_slot("subtask_t")
+    queue = _first_slot("queue")
+    ensemble = _first_slot("ensemble")
+    next_chunk_at = _first_slot("next_chunk_at")
+    first = _first_slot("first")
+    keys = _first_slot("keys")
+    subtask = _first_slot("subtask")
+    start_subtask = _first_slot("start_subtask")
+    stage = _first_slot("stage")
+    ends = _first_slot("ends")
 
     def __init__(self, arg: str, env=None):
         path, overrides, options = parse_argument(arg, Mem0Config, extra=("ablation",))
@@ -75,8 +129,6 @@ class Mem0Policy(BasePolicy):
 
     def _setup(self, model, cfg: Mem0Config, describe: dict[str, Any], env) -> None:
         self.model, self.cfg, self.describe = model, cfg, describe
-        # the cameras it reads: none for a state checkpoint (its env need not render)
-        self.cameras = () if cfg.reads_state else cfg.cameras
         self.state_dim = len(describe.get("state_names") or ())
         self.env = env.unwrapped if env is not None else None
         if self.cfg.gt_classifier and self.env is None:
@@ -92,86 +144,151 @@ class Mem0Policy(BasePolicy):
 
     # ----------------------------------------------------------------- interface
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
-        cfg = self.cfg
-        self.generator = torch.Generator().manual_seed(int(task_info.get("seed", 0)))
-        self.memory = MemoryStore(1, cfg.step_tokens, cfg.sliding_window, cfg.dim)
-        self.events = EventWindow(1, cfg.event_window, cfg.dim)
-        self.debounce = Debounce(cfg.end_window)
-        self.t = 0
-        self.subtask_t = 0  # steps since the subtask began: the sliding window's phase
-        self.queue: list[np.ndarray] = []
-        self.ensemble = TemporalEnsemble(cfg.horizon, cfg.temporal_ensemble)
-        self.next_chunk_at = 0  # with temporal ensembling: the step the next chunk is due
-        self.first: torch.Tensor | None = None  # planner embedding of o_0
-        self.keys: list[tuple[int, torch.Tensor]] = []
-        self.subtask = self.goal
-        self.start_subtask = True
-        self.stage = 0
-        self.ends = 0  # subtask ends declared this episode (eval/boundaries.py reads them)
+        """One episode: a batch of one slot."""
+        self.slots: list[_Slot] = []
+        self._resize(1)
+        self.reset_batch(0, instruction, task_info, self.env)
 
-    @inference
+    def reset_batch(self, slot: int, instruction: str, task_info: dict[str, Any],
+                    env=None) -> None:
+        """A new episode in ``slot``; its memories start at its first ``act_batch``."""
+        self._resize(max(len(self.slots), slot + 1))
+        env = env.unwrapped if env is not None else None
+        if self.cfg.gt_classifier and env is None:
+            raise ValueError("gt_classifier reads the simulator's subtask boundary: it needs "
+                             "each slot's env")
+        self.slots[slot] = _Slot(self.cfg, self.goal, int(task_info.get("seed", 0)), env)
+
     def act(self, observation: dict[str, Any]) -> np.ndarray:
         """One control step: the observation in, the next 14-d joint target out. A new chunk is
         sampled when the last one's ``execute`` actions are used up (with temporal ensembling,
         every ``ensemble_every`` steps)."""
+        return self.act_batch([observation])[0]
+
+    @inference
+    def act_batch(self, observations: list[dict[str, Any] | None]) -> list[np.ndarray | None]:
+        """One control step of every slot whose observation is given (``act``'s, per slot),
+        the network run over ``len(observations)`` rows."""
         cfg, ex = self.cfg, self.model.executor
-        inputs = self.inputs(observation)
+        n = len(observations)
+        live = [i for i, o in enumerate(observations) if o is not None]
+        if not live:
+            return [None] * n
+        self._resize(n)
+        # idle rows copy a live one: every call runs on n rows of real inputs
+        rows = [o if o is not None else observations[live[0]] for o in observations]
+        per_row = [self.inputs(o) for o in rows]
+        inputs = [torch.cat(x) for x in zip(*per_row, strict=True)]
         tokens, z = ex.encode(inputs)
-        if self.t == 0:
-            self.events.reset(torch.ones(1, dtype=torch.bool), z)
-            if self.decompose:
-                self.first = self.model.planner.embed(self.planner_inputs(inputs))
-                self.subtask = self.plan(self.first)
-        elif self.decompose and cfg.gt_classifier and self.env.subtask_stage > self.stage:
-            # The simulator counts the step done after the action that did it: this frame is
-            # the next step's first, as in the demonstrations' labels.
-            self.stage = self.env.subtask_stage
-            self.subtask_ended(inputs)
-        if self.start_subtask:
-            self.memory.reset(torch.ones(1, dtype=torch.bool), tokens)
-            self.queue, self.start_subtask, self.next_chunk_at = [], False, self.t
-            self.subtask_t = 0
-            self.ensemble.reset()  # a new subtask's chunks do not average with the last one's
-        c = ex.context(z, self.memory, torch.tensor([self.subtask]))
+        slots = self.slots
+        is_live = torch.zeros(n, dtype=torch.bool)
+        is_live[live] = True
+        self.events.reset(self._mask(lambda s: s.t == 0, live, n), z)
+        for i in live:
+            s = slots[i]
+            if s.t == 0:
+                if self.decompose:
+                    s.first = self.model.planner.embed(self.planner_inputs(per_row[i]))
+                    s.subtask = self.plan(s.first, i)
+            elif (self.decompose and cfg.gt_classifier
+                  and s.env.subtask_stage > s.stage):
+                # The simulator counts the step done after the action that did it: this frame
+                # is the next step's first, as in the demonstrations' labels.
+                s.stage = s.env.subtask_stage
+                self.subtask_ended(per_row[i], i)
+        starting = self._mask(lambda s: s.start_subtask, live, n)
+        self.memory.reset(starting, tokens)
+        for i in map(int, starting.nonzero()[:, 0]):
+            s = slots[i]
+            s.queue, s.start_subtask, s.next_chunk_at = [], False, s.t
+            s.subtask_t = 0
+            s.ensemble.reset()  # a new subtask's chunks do not average with the last one's
+        c = ex.context(z, self.memory, torch.tensor([s.subtask for s in slots]))
         # Training walks each subtask from its first frame with this stride and pushes every
         # frame it visits; the window here is filled on the same phase.
-        if self.subtask_t % cfg.memory_every == 0:
-            self.memory.push(z)
+        self.memory.push(z, self._mask(lambda s: s.subtask_t % cfg.memory_every == 0, live, n))
+        actions: list[np.ndarray | None] = [None] * n
         if cfg.temporal_ensemble > 0:
-            if self.t >= self.next_chunk_at:
-                self.ensemble.add(self.t, self.chunk(c, observation, cfg.horizon))
-                self.next_chunk_at = self.t + cfg.ensemble_every
-            action = self.ensemble.action(self.t)
+            due = [i for i in live if slots[i].t >= slots[i].next_chunk_at]
+            for i, chunk in self.chunks(c, rows, due, cfg.horizon).items():
+                slots[i].ensemble.add(slots[i].t, chunk)
+                slots[i].next_chunk_at = slots[i].t + cfg.ensemble_every
+            for i in live:
+                actions[i] = slots[i].ensemble.action(slots[i].t)
         else:
-            if not self.queue:
-                self.queue = list(self.chunk(c, observation, cfg.execute))
-            action = self.queue.pop(0)
-        if self.decompose and not cfg.gt_classifier and self.ended(c, z):
-            self.subtask_ended(inputs)
+            due = [i for i in live if not slots[i].queue]
+            for i, chunk in self.chunks(c, rows, due, cfg.execute).items():
+                slots[i].queue = list(chunk)
+            for i in live:
+                actions[i] = slots[i].queue.pop(0)
+        if self.decompose and not cfg.gt_classifier:
+            p = self.end_probabilities(c, z)
+            for i in live:
+                if slots[i].debounce.update(p[i].item() > cfg.end_threshold):
+                    self.subtask_ended(per_row[i], i)
         # The event window is filled on the episode's phase, as training walks it: the
         # classifier compares each step with the last entries, whichever subtask wrote them.
-        if self.t % cfg.memory_every == 0:
-            self.events.push(z)
-        self.t += 1
-        self.subtask_t += 1
-        return action
+        self.events.push(z, self._mask(lambda s: s.t % cfg.memory_every == 0, live, n))
+        for i in live:
+            slots[i].t += 1
+            slots[i].subtask_t += 1
+        return actions
 
     def status(self) -> dict[str, Any]:
         """The subtask the executor is on (an M(n) task's planner choice; the goal on M(1))
         and how many subtask ends it has declared."""
-        return {"subtask": self.describe["executor_texts"][self.subtask], "subtask_ends": self.ends}
+        return self.status_batch(0)
+
+    def status_batch(self, slot: int) -> dict[str, Any]:
+        s = self.slots[slot]
+        return {"subtask": self.describe["executor_texts"][s.subtask], "subtask_ends": s.ends}
 
     # ------------------------------------------------------------------ helpers
-    def chunk(self, c: torch.Tensor, observation: dict[str, Any], length: int) -> np.ndarray:
-        """The first ``length`` joint targets of a chunk sampled from context c."""
+    def _resize(self, n: int) -> None:
+        """n slots: the memory stores get n rows (the rows kept keep their contents)."""
+        if len(self.slots) == n:
+            return
+        cfg, keep = self.cfg, min(len(self.slots), n)
+        memory = MemoryStore(n, cfg.step_tokens, cfg.sliding_window, cfg.dim)
+        events = EventWindow(n, cfg.event_window, cfg.dim)
+        if keep:
+            for new, old in ((memory, self.memory), (events, self.events)):
+                new.load_state({k: torch.cat([v[:keep], getattr(new, k)[keep:]])
+                                for k, v in old.state().items()})
+        self.memory, self.events = memory, events
+        self.slots = self.slots[:n] + [_Slot(cfg, self.goal) for _ in range(n - keep)]
+
+    def _mask(self, test, live: list[int], n: int) -> torch.Tensor:
+        """(n,) bool: the live slots whose state passes ``test``."""
+        mask = torch.zeros(n, dtype=torch.bool)
+        for i in live:
+            mask[i] = bool(test(self.slots[i]))
+        return mask
+
+    def chunks(self, c: torch.Tensor, observations: list[dict[str, Any]], due: list[int],
+               length: int) -> dict[int, np.ndarray]:
+        """The first ``length`` joint targets of a chunk sampled from context c for each slot
+        in ``due``, every row through the head at once; each due slot's noise from its own
+        generator, the other rows' a copy of the first's (their chunks are not used)."""
+        if not due:
+            return {}
         ex, cfg = self.model.executor, self.cfg
-        state = state_tensor(observation)
-        normalised = ex.head.sample(ex.condition(c, state), cfg.flow_steps, self.generator,
-                                    cfg.sample_noise)
-        chunk = ex.normalizer.unaction(normalised, state)[0, :length].double().numpy()
-        if self.ee is not None:  # grasp poses -> joint targets
-            chunk = self.ee.to_joints(chunk, np.asarray(observation["agent_pos"], np.float64))
-        return chunk
+        state = torch.cat([state_tensor(o) for o in observations])
+        shape = (1, cfg.horizon, cfg.action_dim)
+        drawn = {i: torch.randn(shape, generator=self.slots[i].generator, device="cpu")
+                 for i in due}
+        start = torch.cat([drawn.get(i, drawn[due[0]]) for i in range(len(observations))])
+        normalised = ex.head.sample(ex.condition(c, state), cfg.flow_steps,
+                                    noise=cfg.sample_noise, start=start)
+        actions = ex.normalizer.unaction(normalised, state)
+        out = {}
+        for i in due:
+            chunk = actions[i, :length].double().numpy()
+            if self.ee is not None:  # grasp poses -> joint targets
+                chunk = self.ee.to_joints(chunk, np.asarray(observations[i]["agent_pos"],
+                                                            np.float64))
+            out[i] = chunk
+        return out
 
     def inputs(self, observation: dict[str, Any]) -> list[torch.Tensor]:
         """What the executor encodes: one image (or its frozen backbone's feature map) per
@@ -185,32 +302,32 @@ class Mem0Policy(BasePolicy):
         """The planner's share of the step's inputs: its cameras' images, or the states."""
         return inputs if self.planner_cams is None else [inputs[i] for i in self.planner_cams]
 
-    def ended(self, c: torch.Tensor, z: torch.Tensor) -> bool:
-        """The end classifier's debounced verdict on this step."""
-        p = torch.sigmoid(self.model.executor.end_logit(c, z, self.events))[0].item()
-        return self.debounce.update(p > self.cfg.end_threshold)
+    def end_probabilities(self, c: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """P(the subtask has ended) per row, before the debounce."""
+        return torch.sigmoid(self.model.executor.end_logit(c, z, self.events))
 
-    def subtask_ended(self, inputs: list[torch.Tensor]) -> None:
-        planner = self.model.planner
-        self.ends += 1
+    def subtask_ended(self, inputs: list[torch.Tensor], slot: int = 0) -> None:
+        """The end of ``slot``'s subtask, ``inputs`` its end frame's (one row)."""
+        planner, s = self.model.planner, self.slots[slot]
+        s.ends += 1
         frame = planner.embed(self.planner_inputs(inputs))
-        self.keys.append((self.subtask, frame[0]))
-        nxt = self.plan(frame if not self.cfg.use_key else self.first)
+        s.keys.append((s.subtask, frame[0]))
+        nxt = self.plan(frame if not self.cfg.use_key else s.first, slot)
         if nxt != self.done:
-            self.subtask, self.start_subtask = nxt, True
+            s.subtask, s.start_subtask = nxt, True
         # the debounce is not re-armed here: the run of positives that declared this end
         # must break before another can count
 
-    def plan(self, first: torch.Tensor) -> int:
-        planner = self.model.planner
-        if self.keys and self.cfg.use_key:
-            keys = torch.stack([f for _, f in self.keys])[None]
-            text = torch.tensor([[s for s, _ in self.keys]])
-            valid = torch.ones(1, len(self.keys), dtype=torch.bool)
+    def plan(self, first: torch.Tensor, slot: int = 0) -> int:
+        planner, keys_ = self.model.planner, self.slots[slot].keys
+        if keys_ and self.cfg.use_key:
+            keys = torch.stack([f for _, f in keys_])[None]
+            text = torch.tensor([[s for s, _ in keys_]])
+            valid = torch.ones(1, len(keys_), dtype=torch.bool)
         else:
             keys, text = torch.zeros(1, 0, self.cfg.dim), torch.zeros(1, 0, dtype=torch.long)
             valid = torch.zeros(1, 0, dtype=torch.bool)
         logits = planner(first, keys, text, valid)[0]
-        if not self.keys:
+        if not keys_:
             logits[self.done] = -torch.inf  # an episode starts with a subtask
         return int(logits.argmax())

@@ -1,9 +1,10 @@
 """Mem-0's working memory: the anchor (the subtask's first frame) and the sliding window (the
 last K frames), and the residual cross-attention that reads them.
 
-``MemoryStore`` holds one memory per batch slot. Inference uses one slot; training uses one per
-slot of the episode-ordered sampler, so every training frame is paired with the memory the
-policy would hold at that point of the episode. Stored entries are detached: the encoder
+``MemoryStore`` holds one memory per batch slot. Inference uses one per episode played side
+by side (an episode alone: one slot); training uses one per slot of the episode-ordered
+sampler, so every training frame is paired with the memory the policy would hold at that
+point of the episode. Stored entries are detached: the encoder
 learns from the current frame, and memory carries its past outputs.
 """
 
@@ -66,9 +67,14 @@ class EventWindow(nn.Module):
         if which.any():
             self.entries[which] = z.detach()[which, None].expand(-1, self.entries.shape[1], -1)
 
-    def push(self, z: torch.Tensor) -> None:
-        """Append ``z`` (B, d) as the newest entry; the oldest drops out."""
-        self.entries.copy_(torch.cat([self.entries[:, 1:], z.detach()[:, None]], 1))
+    def push(self, z: torch.Tensor, which: torch.Tensor | None = None) -> None:
+        """Append ``z`` (B, d) as the newest entry (of the slots in ``which``); the oldest
+        drops out."""
+        pushed = torch.cat([self.entries[:, 1:], z.detach()[:, None]], 1)
+        if which is None:
+            self.entries.copy_(pushed)
+        else:
+            self.entries[which] = pushed[which.to(self.entries.device)]
 
     def state(self) -> dict[str, torch.Tensor]:
         return {"entries": self.entries}

@@ -68,13 +68,19 @@ class Mem0Frames(DemoDataset):
         super().add_episodes(episodes)
         self.labels += [self.end_label(ep) for ep in episodes]
 
-    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
-        item = super().__getitem__(i)
-        k, t = self.locate(int(i))
-        item["text_index"] = (item[L.SUBTASK_INDEX].clone() if self.decompose
-                              else torch.tensor(self.goal_index))
-        item["end_label"] = torch.tensor(bool(self.labels[k][t]))
-        return item
+    def columns(self) -> dict[str, np.ndarray]:
+        if self._columns is None:
+            super().columns()["end_label"] = np.concatenate(self.labels)
+        return self._columns
+
+    def batch(self, indices: list[int]) -> dict[str, torch.Tensor]:
+        batch = super().batch(indices)
+        k, t = self.locate_many(indices)
+        batch["text_index"] = (batch[L.SUBTASK_INDEX].clone() if self.decompose
+                               else torch.full((len(k),), self.goal_index, dtype=torch.int64))
+        batch["end_label"] = torch.from_numpy(
+            self.columns()["end_label"][self.starts[k] + t].astype(bool))
+        return batch
 
 
 def build_model(cfg: Mem0Config, describe: dict[str, Any], text_vectors=None) -> Mem0Model:
@@ -155,8 +161,8 @@ def to_pose_actions(frames: Mem0Frames, stats, horizon: int) -> Normalizer:
     """Replace every episode's joint targets by grasp-pose targets (``action_space`` "ee"),
     and the normaliser of their ranges."""
     convert = EEActions()
-    for k, ep in enumerate(frames.low_dim):
-        frames.low_dim[k] = replace(ep, action=convert.from_joints(ep.action))
+    frames.replace_episodes([replace(ep, action=convert.from_joints(ep.action))
+                             for ep in frames.low_dim])
     return Normalizer.from_episodes(stats, [ep.state for ep in frames.low_dim],
                                     [ep.action for ep in frames.low_dim], horizon,
                                     relative=np.zeros(EE_DIM, bool))
@@ -176,7 +182,7 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
     planner.to(device)
     trainable = [p for p in planner.parameters() if p.requires_grad]  # (LoRA: adapters only)
     opt = torch.optim.AdamW(trainable, lr=cfg.planner_lr, betas=(0.9, 0.999),
-                            weight_decay=train_cfg.weight_decay)
+                            weight_decay=train_cfg.weight_decay, foreach=True)
     rng = np.random.default_rng(train_cfg.seed)
     acc_ema, loss_ema = 0.0, 0.0
     lengths = [len(ep.subtask_step) for ep in episodes]

@@ -36,12 +36,16 @@ class DDPMSchedule(nn.Module):
     @torch.no_grad()
     def ddim_sample(self, eps_model: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
                     shape: tuple[int, ...], steps: int, generator: torch.Generator | None,
-                    device: torch.device) -> torch.Tensor:
+                    device: torch.device, start: torch.Tensor | None = None) -> torch.Tensor:
         """Deterministic DDIM (eta = 0) in ``steps`` evenly spaced steps from pure noise; the
-        noise comes from the caller's generator, so a seeded episode samples the same chunks."""
+        noise comes from the caller's generator, so a seeded episode samples the same chunks,
+        or is ``start`` (``shape``), drawn by the caller (a generator per row, so that a row's
+        chunk does not depend on the rows beside it)."""
         if not 1 <= steps <= self.train_steps:
             raise ValueError(f"DDIM steps must be in [1, {self.train_steps}], got {steps}")
-        x = torch.randn(shape, generator=generator, device="cpu").to(device)
+        if start is None:
+            start = torch.randn(shape, generator=generator, device="cpu")
+        x = start.to(device)
         stride = self.train_steps // steps
         times = list(range(0, self.train_steps, stride))[::-1][:steps]
         acp = self.alphas_cumprod.cpu().tolist()

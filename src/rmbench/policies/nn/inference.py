@@ -16,18 +16,23 @@ from typing import TypeVar
 
 import torch
 
+from rmbench.training.device import flush_denormals
+
 INFERENCE_THREADS = 1
 
 F = TypeVar("F", bound=Callable)
 
 
 def inference(fn: F) -> F:
-    """Run ``fn`` under ``torch.no_grad`` with ``INFERENCE_THREADS`` intra-op threads."""
+    """Run ``fn`` under ``torch.no_grad`` with ``INFERENCE_THREADS`` intra-op threads and
+    subnormals read as zero (``training.device.flush_denormals``: as in training, and several
+    times faster where activations reach them)."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         threads = torch.get_num_threads()
         torch.set_num_threads(INFERENCE_THREADS)
+        flush_denormals()  # (left on: torch has no getter for the setting to restore)
         try:
             with torch.no_grad():
                 return fn(*args, **kwargs)

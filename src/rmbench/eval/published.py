@@ -21,7 +21,7 @@ GROUPS = ("M(1)", "M(n)")
 @cache
 def data() -> dict[str, Any]:
     """``published.json``: the paper, its protocol, the tasks' TMC groups and its tables."""
-    return json.loads(files("rmbench.suite").joinpath("published.json").read_text())
+    return json.loads(files("rmbench.eval").joinpath("published.json").read_text())
 
 
 def arxiv() -> str:
