@@ -672,7 +672,7 @@ def speed() -> str:
          f"{min(train['base']['cpu_ms_per_step']):.0f} ({train['speedup']:.2f}x); loss curves "
          + ("identical" if train["curves"]["identical"] else "differ"),
          "`benchmarks/train_speed.py`"],
-        [f"a {ab['episodes']}-episode evaluation of a state Mem-0 on {ab['task']} (the state "
+        [f"an evaluation of {ab['episodes']} episodes by a state Mem-0 on {ab['task']} (the state "
          f"recipe, {ab['checkpoint']['step']:,} steps), 1 worker: batch {ab['this']['batch']} "
          f"against one episode at a time ({ab['base']['commit'][:7]})",
          f"{min(ab['this']['cpu_s']):.1f} s of CPU against {min(ab['base']['cpu_s']):.1f} "
