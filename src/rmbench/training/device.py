@@ -12,10 +12,10 @@ def check_device(device: str) -> None:
 
 def flush_denormals() -> None:
     """Read float32 subnormals (below 1.2e-38) as zero in this process's CPU kernels.
-    Activations that reach that range (GELU's tail on large negative inputs) make elementwise
-    kernels tens of times slower: GELU on the executor's (128, 14, 512) activations took 3 ms a
-    call instead of 0.4. Training and inference call it; a float32 sum cannot hold what it
-    drops (a 150-step training's loss curve is bit-identical with and without it)."""
+    Subnormal operands make elementwise kernels tens of times slower (GELU over a (128, 14,
+    512) tensor of them: 20.7 ms against 0.44 for normal values, one thread). Training and
+    inference call it; a float32 sum cannot hold what it drops (a 150-step training's loss
+    curve and 300 closed-loop Mem-0 actions were bit-identical with and without it)."""
     import torch
 
     torch.set_flush_denormal(True)
