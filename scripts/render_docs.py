@@ -77,11 +77,19 @@ def tasks() -> str:
 
 
 # ------------------------------------------------------------------ the state table
+def _needs_no_memory(res: dict) -> list[str]:
+    """The tasks whose chance level is 100%: a policy without memory can solve them, so their
+    rows measure skill, not memory."""
+    return [t.name for t in ordered() if t.name in res["chance"] and res["chance"][t.name]["rate"] >= 1]
+
+
 def _state_rows(res: dict, specs: list[str], extra: Callable[[str], list] = lambda t: [],
-                extra_avg: Callable[[str], list] = lambda g: []) -> list[list[str]]:
+                extra_avg: Callable[..., list] = lambda g, without=(): []) -> list[list[str]]:
     """One row per task (M(1), then M(n)) and the three averages: each measured cell as a rate
     with its interval, each average as the mean of its column's rates (empty where a column
-    lacks a cell of the group)."""
+    lacks a cell of the group). Where a task needs no memory (chance 100%), its group's
+    average and the overall one come again without it, each right below."""
+    skip = _needs_no_memory(res)
     cells, rows, groups = res["cells"], [], {}
     for task in ordered():
         if task.name not in cells:
@@ -93,11 +101,35 @@ def _state_rows(res: dict, specs: list[str], extra: Callable[[str], list] = lamb
                        if applies(s, task.tmc) else "n/a" for s in specs]
                     + extra(task.name))
         if task.name == [t.name for t in ordered() if t.tmc == task.tmc][-1]:
-            rows.append(_average(res, specs, groups[task.tmc], f"average {task.tmc}", task.tmc)
-                        + extra_avg(task.tmc))
+            rows += _averages(res, specs, groups[task.tmc], f"average {task.tmc}", task.tmc,
+                              skip, extra_avg)
     everything = [t for names in groups.values() for t in names]
-    rows.append(_average(res, specs, everything, "average (all)", "") + extra_avg(""))
+    rows += _averages(res, specs, everything, "average (all)", "", skip, extra_avg)
     return rows
+
+
+def _averages(res: dict, specs: list[str], tasks: list[str], name: str, group: str,
+              skip: list[str], extra_avg: Callable[..., list]) -> list[list[str]]:
+    """The average row over ``tasks``, and where some of ``skip`` is among them, the average
+    without those."""
+    rows = [_average(res, specs, tasks, name, group) + extra_avg(group)]
+    without = tuple(t for t in skip if t in tasks)
+    if without:
+        rows.append(_average(res, specs, [t for t in tasks if t not in without],
+                             f"{name} without {_and(list(without))}", group)
+                    + extra_avg(group, without))
+    return rows
+
+
+def _without_line(res: dict) -> str:
+    """The note under a table with averages without the tasks that need no memory."""
+    skip = _needs_no_memory(res)
+    if not skip:
+        return ""
+    rows = "that row" if len(skip) == 1 else "those rows"
+    return (f"\nAverages without {_and(skip)}: the same means with {rows} left out, whose "
+            "chance level is 100% (a policy without memory can solve it: it measures skill, "
+            "not memory).\n")
 
 
 def _older(task: str, spec: str, cell: dict | None) -> str:
@@ -154,37 +186,54 @@ def _chance(res: dict, task: str) -> list[str]:
     return [f"{100 * res['chance'][task]['rate']:.1f}"]
 
 
-def _chance_avg(res: dict, group: str) -> list[str]:
-    tasks = [t.name for t in ordered() if t.name in res["chance"] and (not group or t.tmc == group)]
+def _chance_avg(res: dict, group: str, without: tuple[str, ...] = ()) -> list[str]:
+    tasks = [t.name for t in ordered() if t.name in res["chance"] and (not group or t.tmc == group)
+             and t.name not in without]
     return [f"{100 * sum(res['chance'][t]['rate'] for t in tasks) / len(tasks):.1f}"]
 
 
-def _published_avg(policy: str, group: str) -> str:
-    return f"{paper.average('main', policy, group):.1f}"
+def _published_average(table: str, column: str, group: str,
+                       without: tuple[str, ...] = ()) -> float | None:
+    """The paper's average of ``column`` over ``group`` (its stated one, else the mean of its
+    tasks); ``without``: the mean of its tasks but those (the paper states no such average)."""
+    if not without:
+        return paper.average(table, column, group)
+    rates = paper.columns(table)[column]
+    tasks = [t for t, g in paper.data()["tasks"].items()
+             if (not group or g == group) and t not in without]
+    if any(t not in rates for t in tasks):
+        return None
+    return sum(rates[t] for t in tasks) / len(tasks)
+
+
+def _published_avg(policy: str, group: str, without: tuple[str, ...] = ()) -> str:
+    return f"{_published_average('main', policy, group, without):.1f}"
 
 
 def readme_results() -> str:
     res = load("table_state.json")
     specs = ["mem0", "mem0:no_memory", "dp", "act"]
-    header = ["task", "TMC", *(COLUMN[s] for s in specs), "chance", "Mem-0 (published)"]
+    header = ["task", "TMC", *(f"{COLUMN[s]} (state)" for s in specs), "chance",
+              "Mem-0 (published, cameras)"]
     rows = _state_rows(res, specs,
                        lambda t: _chance(res, t) + [f"{PUBLISHED['Mem-0'][t]:g}"],
-                       lambda g: _chance_avg(res, g) + [_published_avg("Mem-0", g)])
+                       lambda g, w=(): _chance_avg(res, g, w) + [_published_avg("Mem-0", g, w)])
     table = markdown(header, rows)
-    return table + _published_line() + _footnote(table)
+    return table + _published_line() + _without_line(res) + _footnote(table)
 
 
 def state_policies() -> str:
     res = load("table_state.json")
     specs = ["mem0", "mem0:no_memory", "dp", "act"]
     published = list(PUBLISHED)
-    header = ["task", "TMC", *(COLUMN[s] for s in specs), *(f"{p} (published)" for p in published),
-              "chance"]
+    header = ["task", "TMC", *(f"{COLUMN[s]} (state)" for s in specs),
+              *(f"{p} (published, cameras)" for p in published), "chance"]
     rows = _state_rows(res, specs,
                        lambda t: [f"{PUBLISHED[p][t]:g}" for p in published] + _chance(res, t),
-                       lambda g: [_published_avg(p, g) for p in published] + _chance_avg(res, g))
+                       lambda g, w=(): [_published_avg(p, g, w) for p in published]
+                       + _chance_avg(res, g, w))
     table = markdown(header, rows)
-    return table + _published_line() + _footnote(table)
+    return table + _published_line() + _without_line(res) + _footnote(table)
 
 
 def _beside_published(rows: list[list[str]], specs: list[str]) -> list[list[str]]:
@@ -196,11 +245,13 @@ def _beside_published(rows: list[list[str]], specs: list[str]) -> list[list[str]
     for row in rows:
         task = row[0].strip("*")
         group = row[1] if task.startswith("average") else None
+        without = tuple(task.split(" without ")[1].split(" and ")) if " without " in task else ()
         row = list(row)
         for k, spec in enumerate(specs):
             if spec not in names or row[2 + k] == "n/a":
                 continue
-            value = (paper.average("ablations", names[spec], group) if group is not None
+            value = (_published_average("ablations", names[spec], group, without)
+                     if group is not None
                      else paper.columns("ablations")[names[spec]].get(task))
             if value is not None:
                 row[2 + k] += f" ({value:.1f})" if group is not None else f" ({value:g})"
@@ -213,15 +264,17 @@ def state_ablations() -> str:
     specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
              "mem0:gt_classifier"]
     header = ["task", "TMC", *(COLUMN[s] for s in specs), "chance"]
-    rows = _state_rows(res, specs, lambda t: _chance(res, t), lambda g: _chance_avg(res, g))
+    rows = _state_rows(res, specs, lambda t: _chance(res, t),
+                       lambda g, w=(): _chance_avg(res, g, w))
     names = paper.ablation_names()
     table = markdown(header, _beside_published(rows, specs))
     ours = [s for s in specs if s in names and s != "mem0"]
-    return (table + f"\nIn parentheses: the paper's rate (arXiv {published_source('ablations')}; "
+    return (table + "\nrmbench's cells read the state observation; in parentheses: the paper's "
+            f"rate, read from cameras (arXiv {published_source('ablations')}; "
             f"{paper.rollouts()} rollouts each), where {_and([COLUMN[s] for s in ours])} are its "
             f"{_and([names[s] for s in ours])} ({COLUMN['mem0:no_memory']} is not in it); an "
             "average is the paper's where it states one, else the mean of its tasks.\n"
-            + _footnote(table))
+            + _without_line(res) + _footnote(table))
 
 
 def _and(words: list[str]) -> str:
@@ -229,7 +282,9 @@ def _and(words: list[str]) -> str:
 
 
 def _published_line() -> str:
-    return f"\nPublished: arXiv {published_source()} ({paper.rollouts()} rollouts each).\n"
+    return (f"\nPublished: arXiv {published_source()} ({paper.rollouts()} rollouts each), "
+            "read from cameras; rmbench's columns read the state observation, so the two sides "
+            "are compared across observations.\n")
 
 
 def state_differences() -> str:
@@ -251,12 +306,35 @@ def state_differences() -> str:
     left_out = "".join(sorted({m for row in apart.values() for v in row.values() for m in v[2:]}))
     # a row measured on an earlier task version says so
     labels = {t: f"{t} ‡" for t, row in res["cells"].items() if "‡" in _older(t, "mem0", row["mem0"])}
-    lines = difference_table({"cells": cells, "differences": differences(cells)}, specs,
-                             labels=labels, apart=apart)
+    lines = difference_table({"cells": cells, "differences": differences(cells),
+                              "chance": res["chance"]}, specs, labels=labels, apart=apart,
+                             against_chance=True)
     text = "\n".join(lines) + "\n"
     labelled = "‡" if any("‡" in label for label in labels.values()) else ""
-    return (text + _footnote(text, "— {mark} where one of the two cells is", left_out)
+    return (text + _below_chance(res, specs)
+            + _footnote(text, "— {mark} where one of the two cells is", left_out)
             + _footnote(text, marks=labelled))
+
+
+def _below_chance(res: dict, specs: list[str]) -> str:
+    """A table naming, per column of ``specs``, the tasks where its cell's whole interval lies
+    below the task's chance level, each as its rate against the chance level."""
+    rows = []
+    for spec in specs:
+        below = []
+        for task in ordered():
+            cell = res["cells"].get(task.name, {}).get(spec)
+            level = res["chance"].get(task.name, {}).get("rate")
+            if cell and level is not None and Rate.of(cell).ci95[1] < 100 * level:
+                below.append(f"{task.name} ({100 * cell['success_rate']:.0f}"
+                             f"{_older(task.name, spec, cell)} against {100 * level:.1f})")
+        if below:
+            rows.append([COLUMN[spec], ", ".join(below)])
+    if not rows:
+        return ""
+    return ("\nBelow chance outside the noise: the cells whose whole interval lies under their "
+            "task's chance level (a † or ‡ marks the cell itself, as in the tables above).\n\n"
+            + markdown(["column", "below chance on (rate against chance, %)"], rows))
 
 
 def state_seeds() -> str:

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.eval.chance import chance
-from rmbench.eval.intervals import difference, format_difference, outside_noise
+from rmbench.eval.intervals import difference, format_difference, outside_noise, signed
 from rmbench.eval.published import ablation_names
 from rmbench.eval.report import PUBLISHED, Rate, format_cell, published_source, table
 from rmbench.machine import describe, short
@@ -107,14 +107,18 @@ def _markdown_table(res: dict[str, Any], specs: list[str], published: list[str] 
 
 def difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0",
                      labels: dict[str, str] | None = None,
-                     apart: dict[str, dict[str, str]] | None = None) -> list[str]:
+                     apart: dict[str, dict[str, str]] | None = None,
+                     against_chance: bool = False) -> list[str]:
     """Per task, ``base`` minus each column in points with the difference's 95% interval;
     "*" where the interval excludes zero, "—" where either cell is missing. ``labels``: a
     task's name in the table, where it is not the task's own; ``apart``: per task and column,
-    what a cell left out of the comparison reads instead of "—"."""
+    what a cell left out of the comparison reads instead of "—". ``against_chance``: a last
+    column, ``base`` minus the task's chance level (``res["chance"]``), its interval
+    ``base``'s Wilson interval moved by the same amount (chance is exact)."""
     others = [s for s in specs if s != base]
     lines = ["| task | TMC | " + " | ".join(f"{column(base)} − {column(s)}" for s in others)
-             + " |", "|---|---|" + "---|" * len(others)]
+             + (f" | {column(base)} − chance" if against_chance else "")
+             + " |", "|---|---|" + "---|" * (len(others) + against_chance)]
     for task in res["cells"]:
         diffs = res.get("differences", {}).get(task, {})
         values = []
@@ -127,9 +131,25 @@ def difference_table(res: dict[str, Any], specs: list[str], base: str = "mem0",
                 d, (low, high) = diffs[s]["difference"], diffs[s]["ci95"]
                 values.append(format_difference(d, low, high)
                               + ("*" if diffs[s]["outside_noise"] else ""))
+        if against_chance:
+            values.append(minus_chance(res["cells"][task].get(base), res["chance"][task]["rate"]))
         label = (labels or {}).get(task, task)
         lines.append(f"| {label} | {get_task(task).tmc} | " + " | ".join(values) + " |")
     return lines
+
+
+def minus_chance(cell: dict[str, Any] | None, level: float) -> str:
+    """'+25 [+23, +25]*': a cell's success rate minus a chance level (a fraction), in points,
+    with the cell's Wilson interval moved by as much; "*" where that interval excludes zero;
+    "—" where the cell is missing."""
+    if not cell:
+        return "—"
+    r = Rate.of(cell)
+    if not isinstance(r, Rate):  # an older row without its episodes: no interval
+        return signed(r - 100 * level)
+    low, high = r.ci95
+    text = format_difference(r / 100 - level, low / 100 - level, high / 100 - level)
+    return text + ("*" if low > 100 * level or high < 100 * level else "")
 
 
 def markdown(res: dict[str, Any], intervals: bool = True) -> str:
@@ -153,9 +173,10 @@ def markdown(res: dict[str, Any], intervals: bool = True) -> str:
         lines += [f"Published: arXiv {published_source('ablations')}.", ""]
         if intervals and "mem0" in specs and len(specs) > 1:
             lines += ["Mem-0 minus each ablation (points) [95% interval of the difference, "
-                      "Newcombe's]; * where it excludes zero, the difference outside the "
+                      "Newcombe's], and minus the task's chance level [Mem-0's interval moved "
+                      "by it]; * where it excludes zero, the difference outside the "
                       "episodes' noise:", ""]
-            lines += difference_table(res, specs) + [""]
+            lines += difference_table(res, specs, against_chance=True) + [""]
     lines += ["Chance (no memory): the best success rate of a policy with every skill and no "
               "memory, which guesses where only the past would tell (`eval/chance.py`):", ""]
     lines += [f"- {t}: {100 * c['rate']:.1f}%, {c['basis']}" for t, c in res["chance"].items()]
