@@ -30,6 +30,7 @@ from train_speed import ROOT, run, worktree
 
 from rmbench.eval.intervals import wilson
 from rmbench.machine import describe
+from rmbench.video import write_atomic
 
 PYTHON = Path(sys.executable)
 # One side's evaluation, run under that side's rmbench: its CPU time around evaluate() and
@@ -127,9 +128,7 @@ def main() -> None:
         "records_identical": records["base"] == records["this"],
         "machine": describe(),
     }
-    tmp = args.out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(report, indent=2) + "\n")
-    tmp.replace(args.out)
+    write_atomic(args.out, (json.dumps(report, indent=2) + "\n").encode())
     print(f"| side | commit | batch | CPU s (best of {args.rounds}) | success |\n|---|---|---|---|---|")
     for name in sides:
         s = report[name]

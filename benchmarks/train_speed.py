@@ -26,6 +26,7 @@ import sys
 from pathlib import Path
 
 from rmbench.machine import describe
+from rmbench.video import write_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
 PYTHON = Path(sys.executable)
@@ -137,9 +138,7 @@ def main() -> None:
         "curves": curves_agree(curves["base"], curves["this"]),
         "machine": describe(),
     }
-    tmp = args.out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(report, indent=2) + "\n")
-    tmp.replace(args.out)
+    write_atomic(args.out, (json.dumps(report, indent=2) + "\n").encode())
     print(f"| side | commit | CPU ms/step (best of {args.rounds}) |\n|---|---|---|")
     for side in sides:
         print(f"| {side} | {report[side]['commit'][:10]} | {ms[side]:.1f} |")

@@ -202,7 +202,7 @@ def test_an_outside_path_is_caught(tmp_path):
     (tmp_path / "docs").mkdir()
     (tmp_path / "README.md").write_text("x\n")
     source = tmp_path / "docs" / "notes.py"
-    source.write_text("# see ../README.md and ../MEM0.md, ../../up.md, /work/runs/x\n"
+    source.write_text("# see ../README.md and ../NOTES.md, ../../up.md, /work/runs/x\n"
                       "# not paths: .../data/chunk-000, https://example.com/home/x\n")
     found = outside_references(source, tmp_path)
     assert len(found) == 3 and not any("README" in f for f in found), found
