@@ -710,7 +710,7 @@ def aliasing() -> str:
 def speed() -> str:
     sim, collect = load("sim_speed.json"), load("collect_speed.json")
     ev, pol = load("eval_speed.json"), load("policy_speed.json")
-    train, ab = load("train_speed.json"), load("eval_ab_speed.json")
+    train = load("train_speed.json")
     smoke = next(r for r in ev["rows"] if "video" in r["run"])
     round_ = next(r for r in ev["rows"] if "each task" in r["run"])
     cams = f"{len(sim['cameras'])} cameras {sim['resolution']}"
@@ -750,16 +750,21 @@ def speed() -> str:
          f"{min(train['base']['cpu_ms_per_step']):.0f} ({train['speedup']:.2f}x); loss curves "
          + ("identical" if train["curves"]["identical"] else "differ"),
          "`benchmarks/train_speed.py`"],
-        [f"an evaluation of {ab['episodes']} episodes by a state Mem-0 on {ab['task']} (the state "
-         f"recipe, {ab['checkpoint']['step']:,} steps), 1 worker: batch {ab['this']['batch']} "
-         f"against one episode at a time ({ab['base']['commit'][:7]})",
-         f"{min(ab['this']['cpu_s']):.1f} s of CPU against {min(ab['base']['cpu_s']):.1f} "
-         f"({ab['cpu_ratio']:.2f}x less): {ab['this']['cpu_ms_per_step']:.1f} and "
-         f"{ab['base']['cpu_ms_per_step']:.1f} ms a step, of which the env and harness alone "
-         f"(`noop`) {ab['env_only']['cpu_ms_per_step']:.1f}; success {ab['this']['success']} "
-         f"and {ab['base']['success']} of {ab['episodes']}", "`benchmarks/eval_ab_speed.py`"],
     ]
+    rows += [eval_ab_row(load(f.name)) for f in sorted(RESULTS.glob("eval_ab_speed*.json"))]
     return markdown(["what", "figure", "command"], rows)
+
+
+def eval_ab_row(ab: dict) -> list[str]:
+    """A row of ``benchmarks/eval_ab_speed.py``'s: a batched evaluation against one at a time."""
+    return [f"an evaluation of {ab['episodes']} episodes by a state Mem-0 on {ab['task']} (the "
+            f"state recipe, {ab['checkpoint']['step']:,} steps), 1 worker: batch "
+            f"{ab['this']['batch']} against one episode at a time ({ab['base']['commit'][:7]})",
+            f"{min(ab['this']['cpu_s']):.1f} s of CPU against {min(ab['base']['cpu_s']):.1f} "
+            f"({ab['cpu_ratio']:.2f}x less): {ab['this']['cpu_ms_per_step']:.1f} and "
+            f"{ab['base']['cpu_ms_per_step']:.1f} ms a step, of which the env and harness alone "
+            f"(`noop`) {ab['env_only']['cpu_ms_per_step']:.1f}; success {ab['this']['success']} "
+            f"and {ab['base']['success']} of {ab['episodes']}", "`benchmarks/eval_ab_speed.py`"]
 
 
 def policy_speed() -> str:
