@@ -71,7 +71,7 @@ def checkpoint_facts(policy: str) -> dict | None:
         return None
     config = json.loads(path.read_text())
     return {"path": str(path.parent), "step": config.get("step"), "task": config.get("task"),
-            "config": config.get("config")}
+            "demos": (config.get("dataset") or {}).get("episodes"), "config": config.get("config")}
 
 
 def main() -> None:

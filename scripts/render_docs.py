@@ -757,8 +757,10 @@ def speed() -> str:
 
 def eval_ab_row(ab: dict) -> list[str]:
     """A row of ``benchmarks/eval_ab_speed.py``'s: a batched evaluation against one at a time."""
+    ck = ab["checkpoint"]
     return [f"an evaluation of {ab['episodes']} episodes by a state Mem-0 on {ab['task']} (the "
-            f"state recipe, {ab['checkpoint']['step']:,} steps), 1 worker: batch "
+            f"state recipe's settings, {ck['demos']} demonstrations, {ck['step']:,} steps), "
+            f"1 worker: batch "
             f"{ab['this']['batch']} against one episode at a time ({ab['base']['commit'][:7]})",
             f"{min(ab['this']['cpu_s']):.1f} s of CPU against {min(ab['base']['cpu_s']):.1f} "
             f"({ab['cpu_ratio']:.2f}x less): {ab['this']['cpu_ms_per_step']:.1f} and "
