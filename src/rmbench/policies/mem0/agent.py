@@ -99,19 +99,11 @@ class Mem0Policy(BasePolicy):
     current subtask (``status()``), which moves on when the end classifier says it has ended.
     Several episodes at once through ``reset_batch``/``act_batch`` (the module's docstring)."""
 
-    generator = _first_slot("generator")
-    debounce = _first_slot("debounce")
+    # one episode's state that analyses read or set (benchmarks/policy_speed.py, the tests)
     t = _first_slot("t")
-    subtask_t = _first_slot("subtask_t")
-    queue = _first_slot("queue")
-    ensemble = _first_slot("ensemble")
-    next_chunk_at = _first_slot("next_chunk_at")
     first = _first_slot("first")
     keys = _first_slot("keys")
-    subtask = _first_slot("subtask")
     start_subtask = _first_slot("start_subtask")
-    stage = _first_slot("stage")
-    ends = _first_slot("ends")
 
     def __init__(self, arg: str, env=None):
         path, overrides, options = parse_argument(arg, Mem0Config, extra=("ablation",))
