@@ -139,6 +139,18 @@ def check_sets(sets: tuple[str, ...] | list[str]) -> None:
                              f"{', '.join(per_policy)}); fields: {', '.join(sorted(known))}")
 
 
+def sets_for(name: str, sets: tuple[str, ...] | list[str]) -> list[str]:
+    """The ``--set`` items meant for policy ``name``, as FIELD=VALUE (``rmbench train``'s
+    form): FIELD=VALUE where its config has the field (the others are another policy's), and
+    POLICY.FIELD=VALUE naming it."""
+    mine = []
+    for item in sets:
+        policy, field = _target(item)
+        if policy == name or (policy is None and field in policy_fields()[name]):
+            mine.append(f"{field}={item.partition('=')[2]}")
+    return mine
+
+
 def config_for(spec: str, obs: str, sets: tuple[str, ...] | list[str] = ()):
     """The config ``spec`` trains with: ``observation``, its trained ablations and the ``--set``
     items meant for it: FIELD=VALUE where its config has the field (the others are another
@@ -149,11 +161,7 @@ def config_for(spec: str, obs: str, sets: tuple[str, ...] | list[str] = ()):
 
     name, trained, _ = parse_policy(spec)
     cls, _ = trainable(name)
-    mine = []
-    for item in sets:
-        policy, field = _target(item)
-        if policy == name or (policy is None and field in policy_fields()[name]):
-            mine.append(f"{field}={item.partition('=')[2]}")
+    mine = sets_for(name, sets)
     extra = {"ablations": trained} if trained else {}
     try:
         return cls(**{"observation": obs, **parse_overrides(cls, mine), **extra})
