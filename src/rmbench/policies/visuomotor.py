@@ -320,10 +320,12 @@ class VisuomotorPolicy(BasePolicy):
         if not live:
             return [None] * n
         self.slots += [self.new_slot() for _ in range(n - len(self.slots))]
-        rows = [o if o is not None else observations[live[0]] for o in observations]
-        per_row = [self.inputs(o) for o in rows]
-        state = torch.cat([state_tensor(o) for o in rows])
-        features = self.model.observe([torch.cat(x) for x in zip(*per_row, strict=True)], state)
+        # idle rows copy a live one: its inputs, converted once
+        converted = {i: (self.inputs(observations[i]), state_tensor(observations[i])) for i in live}
+        per_row = [converted.get(i, converted[live[0]]) for i in range(n)]
+        state = torch.cat([s for _, s in per_row])
+        features = self.model.observe(
+            [torch.cat(x) for x in zip(*(inputs for inputs, _ in per_row), strict=True)], state)
         for i in live:
             s = self.slots[i]
             s.window = (s.window or [features[i:i + 1]] * self.cfg.obs_steps)[1:] + [features[i:i + 1]]

@@ -169,7 +169,8 @@ class Mem0Policy(BasePolicy):
         self._resize(n)
         # idle rows copy a live one: every call runs on n rows of real inputs
         rows = [o if o is not None else observations[live[0]] for o in observations]
-        per_row = [self.inputs(o) for o in rows]
+        converted = {i: self.inputs(observations[i]) for i in live}  # idle rows reuse one
+        per_row = [converted.get(i, converted[live[0]]) for i in range(n)]
         inputs = [torch.cat(x) for x in zip(*per_row, strict=True)]
         tokens, z = ex.encode(inputs)
         slots = self.slots
