@@ -108,3 +108,36 @@ def test_input_scaling_matches_imagenet_statistics(model):
     z2 = (seen["x"].mean((0, 2, 3)) - bn.running_mean) ** 2 / (bn.running_var + bn.eps)
     mismatch = z2.mean()
     assert mismatch < 0.3
+
+
+def test_folded_backbone_is_the_network(model):
+    """The frozen backbone (batch norms folded, 1x1 convolutions as matrix products) gives the
+    network's features to float rounding, at every stride, on sizes that pad both ways."""
+    from rmbench.policies.nn.efficientnet import FoldedLite0
+
+    folded = FoldedLite0(model)
+    g = torch.Generator().manual_seed(1)
+    for h, w in [(96, 128), (75, 101)]:
+        images = torch.randint(0, 256, (3, 3, h, w), dtype=torch.uint8, generator=g)
+        with torch.no_grad():
+            for stride in FEATURE_CHANNELS:
+                want, got = model.features(images, stride), folded.features(images, stride)
+                assert got.shape == want.shape and got.is_contiguous()
+                torch.testing.assert_close(got, want, atol=2e-4, rtol=1e-4)
+    with pytest.raises(ValueError, match="stride 3"):
+        folded.features(images, 3)
+
+
+def test_folded_features_do_not_depend_on_the_batch(model):
+    """A frame's features are the same bits alone, in a cache's batch of 8 or beside the
+    other cameras of a batched evaluation's 8 episodes (24 frames): what training reads from
+    the cache is what the closed loop computes."""
+    from rmbench.policies.nn.efficientnet import FoldedLite0
+
+    folded = FoldedLite0(model)
+    g = torch.Generator().manual_seed(2)
+    images = torch.randint(0, 256, (24, 3, 96, 128), dtype=torch.uint8, generator=g)
+    alone = torch.cat([folded.features(images[i:i + 1], 16) for i in range(24)])
+    assert torch.equal(torch.cat([folded.features(images[i:i + 8], 16)
+                                  for i in range(0, 24, 8)]), alone)
+    assert torch.equal(folded.features(images, 16), alone)

@@ -31,3 +31,22 @@ def test_no_cpuinfo_still_describes_the_machine():
 def test_this_machine():
     m = describe()
     assert set(m) == {"cpu", "isa", "cores", "platform", "python"} and m["cores"] >= 1
+
+
+def test_usable_cores_follow_the_affinity():
+    """Jobs size their threads by the cores this process may use (``taskset``, a cpuset),
+    not the machine's count."""
+    import os
+
+    from rmbench.machine import usable_cores
+
+    if not hasattr(os, "sched_getaffinity"):
+        assert usable_cores() == (os.cpu_count() or 1)
+        return
+    before = os.sched_getaffinity(0)
+    try:
+        os.sched_setaffinity(0, {min(before)})
+        assert usable_cores() == 1
+    finally:
+        os.sched_setaffinity(0, before)
+    assert usable_cores() == len(before)

@@ -20,6 +20,16 @@ CPUINFO = Path("/proc/cpuinfo")
 VECTOR_ISAS = ("avx512f", "avx2", "avx", "sse4_2")
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity: ``taskset``, a container's cpuset),
+    which a job's threads and worker processes are sized by; ``os.cpu_count()`` counts the
+    machine's."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:  # (no affinity call: macOS, Windows)
+        return os.cpu_count() or 1
+
+
 def _cpuinfo_fields(text: str) -> dict[str, str]:
     """The first processor's ``key: value`` lines of a ``/proc/cpuinfo`` text."""
     fields: dict[str, str] = {}

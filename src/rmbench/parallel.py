@@ -18,6 +18,7 @@ from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 
 from rmbench import source
+from rmbench.machine import usable_cores
 
 BACKENDS = ("local", "ray")
 
@@ -86,7 +87,7 @@ class Pool:
         self.window = 2 * workers
         self.pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"),
                                         initializer=_start_worker,
-                                        initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // workers)))
+                                        initargs=(os.getpid(), max(1, usable_cores() // workers)))
 
     def submit(self, fn, *args):
         return self.pool.submit(_run_checked, source.AT_IMPORT, fn, *args)

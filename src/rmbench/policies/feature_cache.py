@@ -4,7 +4,7 @@ policy with a frozen backbone (``backbone`` in its config) trains without runnin
 Each (episode, camera) is the frame cache's frames (the decoded frames resized to the policy's
 image size by the antialiased resize the closed loop uses too; not stored for this) through
 the backbone up to its feature map at the stride: float32 (T, C, h, w) in
-``DATASET/.cache/features-<backbone>-s<stride>-<W>x<H>/<camera>/``. The frame cache's rules
+``DATASET/.cache/features-v<FEATURES_VERSION>-<backbone>-s<stride>-<W>x<H>/<camera>/``. The frame cache's rules
 hold: a file is written under a temporary name and renamed into place, and its name carries the
 video file's size and modification time, so a dataset collected anew into the same folder is
 encoded anew. A file that does not read back as the array its name promises (cut short, another
@@ -34,6 +34,9 @@ FEATURES_PREFIX = "observation.features."
 # frames per backbone call: small batches run fastest on a CPU core, and up to 8 gave the
 # closed loop's single-step features bit for bit where measured
 ENCODE_BATCH = 8
+# Bumped when the encoding's arithmetic changes (2: batch norms folded, ``FoldedLite0``), so that
+# a cache is never read beside features computed another way at run time.
+FEATURES_VERSION = 2
 
 
 def features_key(camera: str) -> str:
@@ -50,7 +53,7 @@ class FeatureCache:
         self.ds, self.backbone, self.stride = dataset, backbone, stride
         self.size = (int(size[0]), int(size[1]))
         self.shape = feature_shape(stride, self.size)
-        tag = f"features-{backbone}-s{stride}-{self.size[1]}x{self.size[0]}"
+        tag = f"features-v{FEATURES_VERSION}-{backbone}-s{stride}-{self.size[1]}x{self.size[0]}"
         self.dir = Path(cache_dir) if cache_dir is not None else dataset.root / ".cache" / tag
         self._open: dict[tuple[int, str], np.ndarray] = {}
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
+from rmbench.machine import usable_cores
 from rmbench.suite import stages
 from rmbench.suite.job import run_job, source_digest
 from rmbench.suite.plan import Plan, trained_spec
@@ -238,7 +239,7 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
     logs = out / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     needs = plan_jobs(plan, out)
-    pool = (LocalJobs(max(1, (os.cpu_count() or 1) // jobs)) if backend == "local"
+    pool = (LocalJobs(max(1, usable_cores() // jobs)) if backend == "local"
             else RayJobs())
     progress = progress or Progress(plan, out)
     pending = sorted(needs, key=lambda j: PRIORITY[j.kind])  # stable: table order within

@@ -18,7 +18,7 @@ import math
 import torch
 from torch import nn
 
-from rmbench.policies.nn.efficientnet import FEATURE_CHANNELS, EfficientNetLite0, load_pretrained
+from rmbench.policies.nn.efficientnet import FEATURE_CHANNELS, FoldedLite0, load_pretrained
 from rmbench.policies.nn.vision import CameraEncoders, PerCamera, Readout, _groups
 
 CNN = "cnn"
@@ -41,14 +41,11 @@ def feature_shape(stride: int, size: tuple[int, int]) -> tuple[int, int, int]:
 
 
 @functools.cache
-def frozen_backbone(name: str) -> EfficientNetLite0:
-    """The process's one instance of the backbone: ImageNet weights, eval mode, no gradients."""
+def frozen_backbone(name: str) -> FoldedLite0:
+    """The process's one instance of the backbone: ImageNet weights, folded for inference."""
     if name != EFFICIENTNET_LITE0:
         raise ValueError(f"no frozen backbone {name!r}; frozen backbones: {EFFICIENTNET_LITE0}")
-    model = load_pretrained()
-    for p in model.parameters():
-        p.requires_grad_(False)
-    return model
+    return FoldedLite0(load_pretrained())
 
 
 def backbone_features(name: str, stride: int, images: torch.Tensor) -> torch.Tensor:

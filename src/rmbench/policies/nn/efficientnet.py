@@ -16,6 +16,12 @@ statistics training left).
 
 The 16 blocks form 7 stages; :meth:`EfficientNetLite0.features` returns the feature map after
 the last block at a given stride (``FEATURE_CHANNELS``), and runs no block beyond it.
+
+A frozen backbone runs as :class:`FoldedLite0`: the same network for inference only, each batch
+norm folded into the convolution before it and each 1x1 convolution a matrix product over
+channels-last maps. On one CPU core that encodes a 96x128 frame to stride 16 in about half the
+time (oneDNN takes a 1x1 convolution with a bias through its slow im2col path, and an unfolded
+batch norm is a pass of its own); its features equal the unfolded network's to float rounding.
 """
 
 from __future__ import annotations
@@ -150,6 +156,81 @@ class EfficientNetLite0(nn.Module):
         return self._fc(x.mean((2, 3)))
 
     forward = features
+
+
+def _folded(conv: nn.Conv2d, bn: nn.BatchNorm2d) -> tuple[torch.Tensor, torch.Tensor]:
+    """The weight and bias of ``bn(conv(x))`` as one convolution (``bn`` in eval mode)."""
+    scale = bn.weight / torch.sqrt(bn.running_var + bn.eps)
+    return ((conv.weight * scale.view(-1, 1, 1, 1)).detach().contiguous(),
+            (bn.bias - bn.running_mean * scale).detach().contiguous())
+
+
+class _Pointwise:
+    """A 1x1 convolution and its batch norm, folded, on a channels-last map: one addmm."""
+
+    def __init__(self, conv: nn.Conv2d, bn: nn.BatchNorm2d, relu6: bool):
+        weight, self.bias = _folded(conv, bn)
+        self.weight_t = weight[:, :, 0, 0].t()
+        self.relu6 = relu6
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        n, c, h, w = x.shape  # channels-last storage: (n, h, w, c) rows are contiguous
+        y = torch.addmm(self.bias, x.permute(0, 2, 3, 1).reshape(-1, c), self.weight_t)
+        if self.relu6:
+            y.clamp_(0, 6)
+        return y.view(n, h, w, -1).permute(0, 3, 1, 2)
+
+
+class _Spatial:
+    """A kxk (stem or depthwise) convolution and its batch norm, folded, with TensorFlow's
+    "same" padding (given to the convolution itself where it is symmetric), then ReLU6."""
+
+    def __init__(self, conv: SameConv2d, bn: nn.BatchNorm2d):
+        self.weight, self.bias = _folded(conv, bn)
+        self.kernel, self.stride, self.groups = conv.kernel_size[0], conv.stride[0], conv.groups
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        pads = []
+        for size in reversed(x.shape[-2:]):  # (w, h), as F.pad wants them
+            total = max((math.ceil(size / self.stride) - 1) * self.stride + self.kernel - size, 0)
+            pads += [total // 2, total - total // 2]
+        if pads[0] == pads[1] and pads[2] == pads[3]:
+            y = F.conv2d(x, self.weight, self.bias, self.stride, (pads[2], pads[0]), 1,
+                         self.groups)
+        else:
+            y = F.conv2d(F.pad(x, pads), self.weight, self.bias, self.stride, 0, 1, self.groups)
+        return y.clamp_(0, 6)
+
+
+class FoldedLite0:
+    """:meth:`EfficientNetLite0.features` for inference: batch norms folded, 1x1 convolutions
+    as matrix products over channels-last maps. Holds no parameters (no gradients, no
+    ``.train()``); each frame's features depend on that frame alone, wherever it sits in a
+    batch."""
+
+    def __init__(self, model: EfficientNetLite0):
+        self.stem = _Spatial(model._conv_stem, model._bn0)
+        self.blocks = []
+        for b in model._blocks:
+            layers = [_Pointwise(b._expand_conv, b._bn0, True)] if b.expand else []
+            layers += [_Spatial(b._depthwise_conv, b._bn1),
+                       _Pointwise(b._project_conv, b._bn2, False)]
+            self.blocks.append((layers, b.skip))
+        self.last_block = dict(model.last_block)
+
+    @torch.no_grad()
+    def features(self, images: torch.Tensor, stride: int = 32) -> torch.Tensor:
+        """As :meth:`EfficientNetLite0.features`, returned contiguous (NCHW)."""
+        if stride not in self.last_block:
+            raise ValueError(f"stride {stride} is not one of {sorted(FEATURE_CHANNELS)}")
+        x = EfficientNetLite0.normalize(images).contiguous(memory_format=torch.channels_last)
+        x = self.stem(x)
+        for layers, skip in self.blocks[: self.last_block[stride] + 1]:
+            y = x
+            for layer in layers:
+                y = layer(y)
+            x = y + x if skip else y
+        return x.contiguous()
 
 
 def weights_path() -> str:
