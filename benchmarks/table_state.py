@@ -1,5 +1,6 @@
-"""Record cells of an ``rmbench table`` run in benchmarks/results/table_state.json, the state
-table that every number the docs quote about the table comes from.
+"""Record cells of an ``rmbench table`` run in benchmarks/results/table_state.json (the state
+table) or, with ``--obs pixels``, table_pixels.json (the camera table): the files every number
+the docs quote about the tables comes from.
 
     python benchmarks/table_state.py --table runs/table_state \\
         --tasks press_button,cover_blocks --specs mem0,mem0:no_key,mem0:gt_classifier \\
@@ -23,6 +24,9 @@ pooled cell is replaced only seed by seed, never by a cell of one seed.
     python benchmarks/table_state.py --table runs/table_state --tasks press_button \\
         --specs mem0 --seed 1 --dataset rmbench/2
 
+The camera table's file is made by its first record: the table's command, the run's plan
+and chance levels, and no cells yet.
+
 A recorded cell keeps the command that made it, the dataset format it trained on and its
 walls' ``conditions`` (``suite/records.py``), every field null until edited in by hand. The
 file is written atomically.
@@ -42,7 +46,24 @@ from rmbench.suite.stages import pooled_row
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
 
-OUT = Path(__file__).resolve().parent / "results" / "table_state.json"
+RESULTS = Path(__file__).resolve().parent / "results"
+OUT = RESULTS / "table_state.json"
+# the camera table's command, what its results page opens with
+PIXELS_COMMAND = ("rmbench table --obs pixels --tasks all --policies "
+                  "mem0,mem0:no_memory,mem0:no_key,mem0:gt_classifier,dp,act "
+                  "--out runs/table_pixels --jobs 2")
+
+
+def new_table(run: dict) -> dict:
+    """A results file with no cells, for the table ``run`` (a table.json) belongs to."""
+    return {"command": PIXELS_COMMAND, "plan": run.get("plan"), "cells": {}, "chance": {},
+            "machines": {"cpu": {"label": "CPU", "cpu": "x86_64", "cores": 2, "gpu": None,
+                                 "about": None}},
+            "wall_defaults": {"jobs": 2, "train": {"machine": "cpu", "threads": 1,
+                                                   "jobs_beside": 1},
+                              "eval": {"machine": "cpu", "workers": 1}},
+            "superseded": [],
+            "source": "recorded from the cells' table.json by benchmarks/table_state.py"}
 
 
 def _version(task: str, cell: dict) -> tuple:
@@ -128,8 +149,12 @@ def main(argv: list[str] | None = None) -> int:
                                   "other data or another task version moves to superseded)")
     p.add_argument("--seed", type=int, help="the cells are this training seed of the recorded "
                                              "ones: pool them")
-    p.add_argument("--out", type=Path, default=OUT)
+    p.add_argument("--obs", choices=("state", "pixels"), default="state",
+                   help="the table the cells belong to (default state)")
+    p.add_argument("--out", type=Path, help="the results file (default "
+                                            "benchmarks/results/table_<obs>.json)")
     args = p.parse_args(argv)
+    args.out = args.out or RESULTS / f"table_{args.obs}.json"
     if args.seed is None and not args.why:
         raise SystemExit("--why: say why the cells this replaces no longer stand")
     if args.seed is not None and args.seed < 0:
@@ -138,7 +163,14 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("--evaluation records one column: give one --specs")
     run = (json.loads((Path(args.table) / "table.json").read_text()) if args.table
            else evaluation_rows(Path(args.evaluation), args.specs))
-    doc = record(json.loads(args.out.read_text()), run, args.tasks.split(","),
+    ran = (run.get("plan") or {}).get("obs")
+    if ran and ran != args.obs:
+        raise SystemExit(f"{args.table}: a table of the {ran} observation, not {args.obs} "
+                         f"(--obs)")
+    if not args.out.exists() and args.obs == "state":
+        raise SystemExit(f"{args.out}: no such results file")
+    doc = json.loads(args.out.read_text()) if args.out.exists() else new_table(run)
+    doc = record(doc, run, args.tasks.split(","),
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
                  args.seed)
     write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())

@@ -27,7 +27,7 @@ from pathlib import Path
 from rmbench.data.layout import FORMAT
 from rmbench.eval import published as paper
 from rmbench.eval.chance import chance
-from rmbench.eval.intervals import format_difference, format_rate
+from rmbench.eval.intervals import difference, format_difference, format_rate
 from rmbench.eval.report import PUBLISHED, Rate, published_source
 from rmbench.suite.plan import applies
 from rmbench.suite.records import seed_records
@@ -211,15 +211,92 @@ def _published_avg(policy: str, group: str, without: tuple[str, ...] = ()) -> st
 
 
 def readme_results() -> str:
-    res = load("table_state.json")
+    res, cams = load("table_state.json"), pixel_table()
     specs = ["mem0", "mem0:no_memory", "dp", "act"]
-    header = ["task", "TMC", *(f"{COLUMN[s]} (state)" for s in specs), "chance",
+    header = ["task", "TMC", *(f"{COLUMN[s]} (state)" for s in specs),
+              *(f"{COLUMN[s]} (cameras)" for s in PIXEL_MAIN), "chance",
               "Mem-0 (published, cameras)"]
     rows = _state_rows(res, specs,
-                       lambda t: _chance(res, t) + [f"{PUBLISHED['Mem-0'][t]:g}"],
-                       lambda g, w=(): _chance_avg(res, g, w) + [_published_avg("Mem-0", g, w)])
+                       lambda t: _cells(cams, t, PIXEL_MAIN) + _chance(res, t)
+                       + [f"{PUBLISHED['Mem-0'][t]:g}"],
+                       lambda g, w=(): _column_avgs(cams, PIXEL_MAIN, g, w)
+                       + _chance_avg(res, g, w) + [_published_avg("Mem-0", g, w)])
     table = markdown(header, rows)
-    return table + _published_line() + _without_line(res) + _footnote(table)
+    return (table + _published_line() + _pixels_line(cams) + _without_line(res)
+            + _footnote(table))
+
+
+# ------------------------------------------------------------------ the camera table
+PIXEL_MAIN = ["mem0", "mem0:no_memory"]  # the camera columns the README shows
+
+
+def pixel_table() -> dict:
+    """benchmarks/results/table_pixels.json with a row for every task (empty where none of its
+    cells is recorded yet) and every task's chance level."""
+    path = RESULTS / "table_pixels.json"
+    res = json.loads(path.read_text()) if path.exists() else {"cells": {}, "chance": {}}
+    cells = {t.name: res["cells"].get(t.name, {}) for t in ordered()}
+    odds = {t.name: res["chance"].get(t.name) or {"rate": chance(t.name).rate} for t in ordered()}
+    return {**res, "cells": cells, "chance": odds}
+
+
+def _cells(res: dict, task: str, specs: list[str]) -> list[str]:
+    row = res["cells"].get(task, {})
+    return [rate(row.get(s)) + _older(task, s, row.get(s)) if applies(s, get_task(task).tmc)
+            else "n/a" for s in specs]
+
+
+def _column_avgs(res: dict, specs: list[str], group: str, without: tuple[str, ...] = ()) -> list[str]:
+    tasks = [t.name for t in ordered() if (not group or t.tmc == group) and t.name not in without]
+    return _average(res, specs, tasks, "", group)[2:]
+
+
+def _pixels_line(cams: dict) -> str:
+    done = sum(1 for t in ordered() if cams["cells"][t.name].get("mem0"))
+    return (f"\nThe camera columns: [the camera table](docs/results/benchmark_pixels.md), "
+            f"{done} of 9 rows measured so far (— where a cell is not yet).\n")
+
+
+def _memory_gap(res: dict, task: str) -> list[str]:
+    """Mem-0 minus ``no_memory`` in points with Newcombe's 95% interval, * where it excludes 0."""
+    row = res["cells"].get(task, {})
+    a, b = row.get("mem0"), row.get("mem0:no_memory")
+    if a is None or b is None:
+        return ["—"]
+    ra, rb = Rate.of(a), Rate.of(b)
+    d, low, high = difference(ra.successes, ra.episodes, rb.successes, rb.episodes)
+    return [format_difference(100 * d, 100 * low, 100 * high) + (" *" if low > 0 or high < 0 else "")]
+
+
+def pixels_policies() -> str:
+    res, state = pixel_table(), load("table_state.json")
+    specs = ["mem0", "mem0:no_memory", "dp", "act"]
+    header = ["task", "TMC", *(f"{COLUMN[s]} (cameras)" for s in specs),
+              "Mem-0 − `no_memory` (points)", "Mem-0 (state)", "Mem-0 (published, cameras)",
+              "chance"]
+    rows = _state_rows(res, specs,
+                       lambda t: _memory_gap(res, t) + _cells(state, t, ["mem0"])
+                       + [f"{PUBLISHED['Mem-0'][t]:g}"] + _chance(res, t),
+                       lambda g, w=(): [""] + _column_avgs(state, ["mem0"], g, w)
+                       + [_published_avg("Mem-0", g, w)] + _chance_avg(res, g, w))
+    table = markdown(header, rows)
+    return (table + "\nMem-0 − `no_memory`: the difference in points with Newcombe's 95% "
+            "interval, * where it excludes 0. The state column is the [state table]"
+            "(benchmark_state.md)'s; the published one the paper's, read from cameras as these "
+            "cells are.\n" + _without_line(res) + _footnote(table))
+
+
+def pixels_ablations() -> str:
+    res = pixel_table()
+    specs = ["mem0", "mem0:no_key", "mem0:gt_classifier"]
+    header = ["task", "TMC", *(f"{COLUMN[s]} (cameras)" for s in specs), "chance"]
+    rows = _state_rows(res, specs, lambda t: _chance(res, t),
+                       lambda g, w=(): _chance_avg(res, g, w))
+    rows = [r for r in rows if r[1] == "M(n)" or r[0] == "**average (all)**"][:-1]
+    table = markdown(header, _beside_published(rows, specs))
+    return (table + "\nIn parentheses: the paper's rate (arXiv "
+            f"{published_source('ablations')}), where `no_key` is its w/o Key and "
+            "`gt_classifier` its GT classifier.\n" + _footnote(table))
 
 
 def state_policies() -> str:
@@ -283,8 +360,8 @@ def _and(words: list[str]) -> str:
 
 def _published_line() -> str:
     return (f"\nPublished: arXiv {published_source()} ({paper.rollouts()} rollouts each), "
-            "read from cameras; rmbench's columns read the state observation, so the two sides "
-            "are compared across observations.\n")
+            "read from cameras; rmbench's columns marked (state) read the state observation, "
+            "so they and the paper's are compared across observations.\n")
 
 
 def state_differences() -> str:
@@ -804,6 +881,7 @@ def backbone_speed() -> str:
 TABLES: dict[str, Callable[[], str]] = {
     "tasks": tasks,
     "readme-results": readme_results, "state-policies": state_policies,
+    "pixels-policies": pixels_policies, "pixels-ablations": pixels_ablations,
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,

@@ -178,3 +178,22 @@ def test_the_command_line_refuses_a_negative_seed_and_a_missing_why(table_state)
     with pytest.raises(SystemExit, match="--why: say why"):
         table_state.main(["--table", "t", "--tasks", "press_button", "--specs", "mem0",
                           "--dataset", "rmbench/2"])
+
+
+def test_the_camera_table_starts_from_its_first_record(table_state, tmp_path):
+    """``--obs pixels`` records into a file of its own, made by the first record; a run of
+    the other observation is refused in one line."""
+    import json
+
+    run = {**_run(), "plan": {"obs": "pixels", "tasks": ["press_button"]}}
+    (tmp_path / "table.json").write_text(json.dumps(run))
+    out = tmp_path / "table_pixels.json"
+    args = ["--table", str(tmp_path), "--tasks", "press_button", "--specs", "mem0",
+            "--dataset", "rmbench/2", "--why", "first", "--obs", "pixels", "--out", str(out)]
+    assert table_state.main(args) == 0
+    doc = json.loads(out.read_text())
+    assert doc["command"] == table_state.PIXELS_COMMAND and doc["plan"]["obs"] == "pixels"
+    assert doc["cells"]["press_button"]["mem0"]["successes"] == 36
+    assert doc["chance"]["press_button"] == {"rate": 0.011} and doc["superseded"] == []
+    with pytest.raises(SystemExit, match="not state"):
+        table_state.main([*args[:-4], "--out", str(out)])  # --obs state by default
