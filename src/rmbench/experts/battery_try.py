@@ -15,7 +15,7 @@ from rmbench.tasks.battery_try import PAIRS, SLOT_TOL, TRIES
 
 OPENING = 0.5  # enough for a 24 mm cell, narrow beside the holder's plates
 AWAY = np.pi / 2  # yaw of a positive end pointing away from the robot
-SETTLE = 10  # steps an arm back home holds, for its servos to settle there
+SETTLE = 20  # steps an arm back home holds: its servos settle and the task counts the step
 HOVER = 0.08  # halfway down (where a set-down is lined up) a held cell still clears the plates
 
 

@@ -20,7 +20,13 @@ import numpy as np
 from rmbench.sim import robot
 from rmbench.sim.station import HOME_ARM, TABLE_TOP
 
-HOME_TOL = 0.03  # m: a gripper this close to where it rests at home is back home
+# An arm with every joint within HOME_JOINT_TOL (rad) of its home angle, moving slower than
+# HOME_JOINT_SPEED (rad/s), is back home and settled there. A test on the gripper's position
+# alone passed while the arm that had just come back still turned its wrist, 0.1-0.2 rad from
+# home, which told which arm had made the last move. An arm at rest reads within 0.003 rad of
+# home; one just back, counted under these bounds, within 0.005.
+HOME_JOINT_TOL = 0.005
+HOME_JOINT_SPEED = 0.03
 
 
 @dataclass(frozen=True)
@@ -108,8 +114,11 @@ class Task:
             piece.bind(model)
         self._fingers = {model.geom(f"{side}/10_{f}_gripper_finger").id
                          for side in ("left", "right") for f in ("left", "right")}
-        self._grasp_sites = [model.site(f"{side}/grasp").id for side in robot.SIDES]
-        self._home_sites = _home_sites(model, self._grasp_sites)
+        self._arm_qpos = np.array([model.joint(f"{side}/{joint}").qposadr[0]
+                                   for side in robot.SIDES for joint in robot.ARM_JOINTS])
+        self._arm_dof = np.array([model.joint(f"{side}/{joint}").dofadr[0]
+                                  for side in robot.SIDES for joint in robot.ARM_JOINTS])
+        self._home_qpos = np.concatenate([HOME_ARM[side] for side in robot.SIDES])
 
     def initialize(self, rng: np.random.Generator) -> None:
         """Sample the episode's layout and hidden variables; place everything. Called by
@@ -187,11 +196,13 @@ class Task:
         return False
 
     def hands_home(self) -> bool:
-        """Both grippers back (within ``HOME_TOL``) where they rest at home. battery_try counts
-        a try only then, as the benchmark's reference ends each try with the arm back at its
-        origin: the frame the next try is chosen at must not show which arm made the last."""
-        sites = self.data.site_xpos[self._grasp_sites]
-        return bool(np.linalg.norm(sites - self._home_sites, axis=1).max() <= HOME_TOL)
+        """Both arms back home and settled: every arm joint within ``HOME_JOINT_TOL`` of its
+        home angle and slower than ``HOME_JOINT_SPEED``. battery_try counts a try only then, as the benchmark's reference ends each
+        try with the arm back at its origin: the frame the next try is chosen at must show
+        neither which arm made the last move nor that one is still on its way back."""
+        gap = np.abs(self.data.qpos[self._arm_qpos] - self._home_qpos)
+        speed = np.abs(self.data.qvel[self._arm_dof])
+        return bool(gap.max() <= HOME_JOINT_TOL and speed.max() <= HOME_JOINT_SPEED)
 
     def touched_by_fingers(self, body_id: int) -> bool:
         """Whether any gripper finger is in contact with ``body_id``."""
@@ -204,12 +215,3 @@ class Task:
                 return True
         return False
 
-
-def _home_sites(model: mujoco.MjModel, sites: list[int]) -> np.ndarray:
-    """The grasp sites' positions with both arms at home (forward kinematics only)."""
-    data = mujoco.MjData(model)
-    for side in robot.SIDES:
-        for joint, q in zip(robot.ARM_JOINTS, HOME_ARM[side], strict=True):
-            data.qpos[model.joint(f"{side}/{joint}").qposadr[0]] = q
-    mujoco.mj_kinematics(model, data)
-    return data.site_xpos[sites].copy()

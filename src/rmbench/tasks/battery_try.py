@@ -23,8 +23,9 @@ Failure: a battery off the table.
 
 Memory: TMC M(n). Aliasing point: the slots' contact plates hide the cells' ends from the
 head camera, so after a failed try the holder looks like after any other failed try; only the
-past tells which pairs were already tried. With both arms home at every count, the view after
-the inserts is that view too. Without memory, flipping either cell at random finds the pair
+past tells which pairs were already tried. A try counts only with both arms home and settled
+(every arm joint within 0.02 rad of home), so the view after the inserts is that view too,
+arms included: nothing shows which arm moved last. Without memory, flipping either cell at random finds the pair
 within the step limit 75% of the time (``eval/chance.py``).
 """
 
@@ -66,7 +67,7 @@ def flips(correct: tuple[int, int]) -> list[int]:
 @register
 class BatteryTry(Task):
     name = "battery_try"
-    gym_id = "rmbench/BatteryTry-v2"
+    gym_id = "rmbench/BatteryTry-v3"
     tmc = "M(n)"
     step_limit = 1200
     subtasks = ("insert the left battery", "insert the right battery",
@@ -164,9 +165,10 @@ class BatteryTry(Task):
         self.lamp.set(self.model, "green" if lit else "off")
         plan = self.plan()
         # Inserts end with the cell in its slot positive-away; each flip ends when the pair
-        # shows the next try of the sequence. Either counts only once both arms are home
-        # again: with the arm still at the holder, the frame the next step is chosen at would
-        # show which cell it just set down, and so which try comes next, without memory.
+        # shows the next try of the sequence. Either counts only once both arms are home and
+        # settled: with an arm still at the holder (v1) or still turning its wrist back (v2),
+        # the frame the next step is chosen at would show which arm made the last move, and
+        # so which try comes next, without memory.
         home = self.hands_home()
         while home and self.cursor < len(plan):
             if self.cursor < 2:
