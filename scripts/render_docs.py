@@ -829,6 +829,16 @@ def speed() -> str:
          "`benchmarks/train_speed.py`"],
     ]
     rows += [eval_ab_row(load(f.name)) for f in sorted(RESULTS.glob("eval_ab_speed*.json"))]
+    fold = load("backbone_fold.json")
+    cpu = fold["cpu_ms_per_frame"]
+    rows.append([f"the frozen EfficientNet-Lite0 to stride {fold['stride']}, "
+                 f"{fold['image_size'][0]}x{fold['image_size'][1]} frames, 1 thread: folded "
+                 "(as the policies run it) against the network as written",
+                 f"{cpu['folded']['batch8']:.1f} ms of CPU a frame against "
+                 f"{cpu['network']['batch8']:.1f} at batch 8 ({fold['speedup']['batch8']:.2f}x), "
+                 f"{cpu['folded']['batch1']:.1f} against {cpu['network']['batch1']:.1f} at batch 1 "
+                 f"({fold['speedup']['batch1']:.2f}x); features within "
+                 f"{fold['max_abs_difference']:.0e}", "`benchmarks/backbone_fold.py`"])
     return markdown(["what", "figure", "command"], rows)
 
 

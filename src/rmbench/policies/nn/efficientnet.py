@@ -19,9 +19,10 @@ the last block at a given stride (``FEATURE_CHANNELS``), and runs no block beyon
 
 A frozen backbone runs as :class:`FoldedLite0`: the same network for inference only, each batch
 norm folded into the convolution before it and each 1x1 convolution a matrix product over
-channels-last maps. On one CPU core that encodes a 96x128 frame to stride 16 in about half the
-time (oneDNN takes a 1x1 convolution with a bias through its slow im2col path, and an unfolded
-batch norm is a pass of its own); its features equal the unfolded network's to float rounding.
+channels-last maps. On one CPU core that encodes a 96x128 frame to stride 16 with 1.5-1.9x
+less CPU time (``benchmarks/backbone_fold.py``): oneDNN takes a 1x1 convolution with a bias
+through its slow im2col path, and an unfolded batch norm is a pass of its own. Its features
+equal the unfolded network's to float rounding.
 """
 
 from __future__ import annotations
