@@ -519,3 +519,33 @@ def test_training_seeds_are_columns_of_their_own_folders_pooled_into_one_cell(ca
     assert cli(["table", "--obs", "state", "--tasks", "press_button", "--train-seeds", "-1",
                 "--report-only", "--out", "/nonexistent"]) != 0
     assert "--train-seeds takes whole numbers" in capsys.readouterr().err
+
+
+def test_folders_of_another_task_version_are_moved_aside(tmp_path):
+    """A table re-run after a task's version changed makes that task's cells again: its data
+    (with the data's clock), checkpoints and evaluations of the old version move aside, named
+    by it, and what is of the current version stays."""
+    import json
+
+    from rmbench.suite import stages
+    from rmbench.tasks import get_task
+
+    task, old = "swap_blocks", "rmbench/SwapBlocks-v0"
+    plan = Plan("state", (task,), ("mem0", "dp"), steps=10, batch=2, episodes=2)
+    data = plan.data_dir(tmp_path, task)
+    (data / "meta").mkdir(parents=True)
+    (data / "meta" / "rmbench.json").write_text(json.dumps({"gym_id": old}))
+    (data.parent / "timing.json").write_text("{}")
+    stale, fresh = plan.train_dir(tmp_path, task, "mem0"), plan.train_dir(tmp_path, task, "dp")
+    for folder, version in ((stale, old), (fresh, get_task(task).gym_id)):
+        folder.mkdir(parents=True)
+        (folder / "config.json").write_text(json.dumps({"gym_id": version}))
+    evals = plan.eval_dir(tmp_path, task, "mem0") / task
+    evals.mkdir(parents=True)
+    (evals / "version.json").write_text(json.dumps({"gym_id": old}))
+    moved = stages.retire_other_versions(plan, tmp_path, task)
+    assert {a.name for a, _ in moved} == {"data", "timing.json", stale.name, evals.parent.name}
+    assert all(b.name == f"{a.name}~SwapBlocks-v0" and b.exists() and not a.exists()
+               for a, b in moved)
+    assert (fresh / "config.json").exists()  # the current version's stays
+    assert stages.retire_other_versions(plan, tmp_path, task) == []  # nothing left to move

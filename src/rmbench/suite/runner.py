@@ -238,6 +238,10 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
     out = Path(out)
     logs = out / "logs"
     logs.mkdir(parents=True, exist_ok=True)
+    for task in dict.fromkeys(t for t, _ in plan.cells()):
+        for old, new in stages.retire_other_versions(plan, out, task):
+            print(f"{old} was made on another version of {task}: moved to {new.name}",
+                  flush=True)
     needs = plan_jobs(plan, out)
     pool = (LocalJobs(max(1, usable_cores() // jobs)) if backend == "local"
             else RayJobs())

@@ -17,7 +17,9 @@ other; a cube off the table.
 
 Memory: TMC M(1). Aliasing point: mid-sequence the table again shows two full trays and an
 empty one, as at the start of some other episode; only the past tells which move comes next
-and where each cube started.
+and where each cube started. Every move ends with its arm home and its fingers open as at
+reset (v2; v1 left them at the half-open tray opening, which told a later moment from the
+first).
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ def roles(empty: int) -> tuple[int, int]:
 @register
 class SwapBlocks(Task):
     name = "swap_blocks"
-    gym_id = "rmbench/SwapBlocks-v1"
+    gym_id = "rmbench/SwapBlocks-v2"
     tmc = "M(1)"
     step_limit = 1000
     subtasks = ("move the first block to the empty tray",
