@@ -43,6 +43,7 @@ from rmbench.eval.chance import chance
 from rmbench.suite.plan import split_seed, with_seed
 from rmbench.suite.records import cell_record, evaluation_rows, seed_records, unstated_conditions
 from rmbench.suite.stages import pooled_row
+from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
 
@@ -66,10 +67,14 @@ def new_table(run: dict) -> dict:
             "source": "recorded from the cells' table.json by benchmarks/table_state.py"}
 
 
-def _version(task: str, cell: dict) -> tuple:
+def _version(task: str, cell: dict, column: str) -> tuple:
     """What a cell was measured on: its dataset format and task version. Cells of one such
-    pair are one recipe's measurements; others do not replace or pool with them."""
-    return cell.get("dataset"), recorded_gym_id(task, cell)
+    pair are one recipe's measurements; others do not replace or pool with them. The format
+    counts only for Mem-0's columns on M(n) rows: it changed how a plan's steps are cut into
+    subtasks, which M(1) Mem-0 (one subtask, the goal), DP and ACT do not read (as the docs'
+    marks say, scripts/render_docs.py)."""
+    reads_subtasks = column.startswith("mem0") and get_task(task).tmc == "M(n)"
+    return cell.get("dataset") if reads_subtasks else None, recorded_gym_id(task, cell)
 
 
 def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:
@@ -81,7 +86,7 @@ def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> 
     if "seeds" in new:
         raise SystemExit(f"{task} {column}: the new cell pools seeds {sorted(new['seeds'])}; "
                          f"record one seed")
-    (ours, our_id), (theirs, their_id) = _version(task, new), _version(task, old)
+    (ours, our_id), (theirs, their_id) = _version(task, new, column), _version(task, old, column)
     if (ours, our_id) != (theirs, their_id):
         raise SystemExit(f"{task} {column}: seed {seed} trained on {ours} ({our_id}), the "
                          f"recorded cell on {theirs} ({their_id})")
@@ -123,7 +128,7 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                                  f"{sorted(old['seeds'])}; give --seed to replace one")
             # a cell of the same data and task version is the same recipe measured before
             # (or one of the seeds the new cell pools): the new one stands for it
-            if old is not None and _version(task, old) != _version(task, new):
+            if old is not None and _version(task, old, spec) != _version(task, new, spec):
                 replaced.setdefault(task, {})[spec] = old
             doc["cells"][task][spec] = new
         doc["chance"][task] = run["chance"][task] if "chance" in run else asdict(chance(task))

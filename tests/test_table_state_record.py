@@ -197,3 +197,16 @@ def test_the_camera_table_starts_from_its_first_record(table_state, tmp_path):
     assert doc["chance"]["press_button"] == {"rate": 0.011} and doc["superseded"] == []
     with pytest.raises(SystemExit, match="not state"):
         table_state.main([*args[:-4], "--out", str(out)])  # --obs state by default
+
+
+def test_an_m1_seed_pools_across_dataset_formats_an_mn_seed_does_not(table_state):
+    """The dataset format changed how plan steps are cut into subtasks: M(1) Mem-0 reads one
+    subtask (the goal), so its seeds pool across formats; an M(n) Mem-0 seed does not."""
+    run = {"command": "rmbench table ...", "plan": {"policies": ["mem0@1"]},
+           "cells": {"swap_T": {"mem0": _seed_row(70)}, "press_button": {"mem0": _seed_row(61)}}}
+    doc = {"cells": {"swap_T": {"mem0": _seed_row(77)}, "press_button": {"mem0": _seed_row(69)}},
+           "chance": {}, "superseded": []}  # recorded before cells kept their format
+    doc = table_state.record(doc, run, ["swap_T"], ["mem0"], "rmbench/2", "x", "t", seed=1)
+    assert doc["cells"]["swap_T"]["mem0"]["successes"] == 147
+    with pytest.raises(SystemExit, match="seed 1 trained on rmbench/2"):
+        table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/2", "x", "t", seed=1)
