@@ -108,7 +108,7 @@ def test_every_record_keeps_its_wall_conditions_as_fields():
     groups = [res["cells"], *(g["cells"] for g in res["superseded"])]
     records = [(t, s, r) for cells in groups for t, row in cells.items() for s, c in row.items()
                for r in (c.get("seeds") or {"0": c}).values()]
-    assert len(records) == 99
+    assert len(records) >= 99  # the 99 converted to fields, and every record since
     for task, spec, r in records:
         where = f"{task} {spec}"
         assert not {"train_wall", "eval_wall"} & set(r.get("record", {})), where
