@@ -41,9 +41,14 @@ from pathlib import Path
 
 from rmbench.eval.chance import chance
 from rmbench.suite.plan import split_seed, with_seed
-from rmbench.suite.records import cell_record, evaluation_rows, seed_records, unstated_conditions
+from rmbench.suite.records import (
+    cell_record,
+    evaluation_rows,
+    reads_subtask_cut,
+    seed_records,
+    unstated_conditions,
+)
 from rmbench.suite.stages import pooled_row
-from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video import write_atomic
 
@@ -68,13 +73,11 @@ def new_table(run: dict) -> dict:
 
 
 def _version(task: str, cell: dict, column: str) -> tuple:
-    """What a cell was measured on: its dataset format and task version. Cells of one such
-    pair are one recipe's measurements; others do not replace or pool with them. The format
-    counts only for Mem-0's columns on M(n) rows: it changed how a plan's steps are cut into
-    subtasks, which M(1) Mem-0 (one subtask, the goal), DP and ACT do not read (as the docs'
-    marks say, scripts/render_docs.py)."""
-    reads_subtasks = column.startswith("mem0") and get_task(task).tmc == "M(n)"
-    return cell.get("dataset") if reads_subtasks else None, recorded_gym_id(task, cell)
+    """What a cell was measured on: its dataset format (where the cell depends on it) and
+    task version. Cells of one such pair are one recipe's measurements; others do not replace
+    or pool with them."""
+    fmt = cell.get("dataset") if reads_subtask_cut(task, column) else None
+    return fmt, recorded_gym_id(task, cell)
 
 
 def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:

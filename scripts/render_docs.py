@@ -30,7 +30,7 @@ from rmbench.eval.chance import chance
 from rmbench.eval.intervals import difference, format_difference, format_rate
 from rmbench.eval.report import PUBLISHED, Rate, published_source
 from rmbench.suite.plan import applies
-from rmbench.suite.records import seed_records
+from rmbench.suite.records import reads_subtask_cut, seed_records
 from rmbench.suite.tables import difference_table, differences
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered, recorded_gym_id
@@ -142,7 +142,7 @@ def _older(task: str, spec: str, cell: dict | None) -> str:
         return ""
     cls = get_task(task)
     marks = ""
-    if cls.tmc == "M(n)" and spec.startswith("mem0") and cell.get("dataset") != FORMAT:
+    if reads_subtask_cut(task, spec) and cell.get("dataset") != FORMAT:
         marks += "†"
     if recorded_gym_id(task, cell) != cls.gym_id:
         marks += "‡"

@@ -3,8 +3,8 @@ policy with a frozen backbone (``backbone`` in its config) trains without runnin
 
 Each (episode, camera) is the frame cache's frames (the decoded frames resized to the policy's
 image size by the antialiased resize the closed loop uses too; not stored for this) through
-the backbone up to its feature map at the stride: float32 (T, C, h, w) in
-``DATASET/.cache/features-v<FEATURES_VERSION>-<backbone>-s<stride>-<W>x<H>/<camera>/``. The frame cache's rules
+the backbone up to its feature map at the stride: float32 (T, C, h, w) in ``DATASET/.cache/
+features-v<FEATURES_VERSION>-<backbone>-s<stride>-<W>x<H>/<camera>/``. The frame cache's rules
 hold: a file is written under a temporary name and renamed into place, and its name carries the
 video file's size and modification time, so a dataset collected anew into the same folder is
 encoded anew. A file that does not read back as the array its name promises (cut short, another

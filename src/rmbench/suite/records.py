@@ -25,6 +25,7 @@ from rmbench.eval.intervals import wilson
 from rmbench.eval.report import Rate
 from rmbench.machine import describe
 from rmbench.suite.stages import TIMING, result_row
+from rmbench.tasks import get_task
 
 KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",
         "failure_reasons", "train_wall_s", "train_wall_from_step", "eval_wall_s", "machines",
@@ -98,3 +99,10 @@ def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
     return {"command": f"rmbench eval {tasks} --policy {run['policy']} --episodes "
                        f"{run['episodes']} --seed {run['seed']} --out {folder}",
             "plan": None, "cells": cells}
+
+
+def reads_subtask_cut(task: str, column: str) -> bool:
+    """Whether a cell depends on the dataset format (how a plan's steps are cut into
+    subtasks): Mem-0's columns on an M(n) row. M(1) Mem-0 runs one subtask (the goal), and DP
+    and ACT read no subtask, so the format changes nothing they learn."""
+    return column.startswith("mem0") and get_task(task).tmc == "M(n)"

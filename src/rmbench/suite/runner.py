@@ -238,14 +238,14 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
     out = Path(out)
     logs = out / "logs"
     logs.mkdir(parents=True, exist_ok=True)
+    progress = progress or Progress(plan, out)
     for task in dict.fromkeys(t for t, _ in plan.cells()):
         for old, new in stages.retire_other_versions(plan, out, task):
-            print(f"{old} was made on another version of {task}: moved to {new.name}",
-                  flush=True)
+            progress.show(set(), {}, f"{old} was made on another version of {task}: "
+                                     f"moved to {new.name}")
     needs = plan_jobs(plan, out)
     pool = (LocalJobs(max(1, usable_cores() // jobs)) if backend == "local"
             else RayJobs())
-    progress = progress or Progress(plan, out)
     pending = sorted(needs, key=lambda j: PRIORITY[j.kind])  # stable: table order within
     done: set[Job] = set()
     failed: dict[Job, str] = {}

@@ -197,9 +197,10 @@ class Task:
 
     def hands_home(self) -> bool:
         """Both arms back home and settled: every arm joint within ``HOME_JOINT_TOL`` of its
-        home angle and slower than ``HOME_JOINT_SPEED``. battery_try counts a try only then, as the benchmark's reference ends each
-        try with the arm back at its origin: the frame the next try is chosen at must show
-        neither which arm made the last move nor that one is still on its way back."""
+        home angle and slower than ``HOME_JOINT_SPEED``. battery_try counts a try only then,
+        as the benchmark's reference ends each try with the arm back at its origin: the frame
+        the next try is chosen at must show neither which arm made the last move nor that one
+        is still on its way back."""
         gap = np.abs(self.data.qpos[self._arm_qpos] - self._home_qpos)
         speed = np.abs(self.data.qvel[self._arm_dof])
         return bool(gap.max() <= HOME_JOINT_TOL and speed.max() <= HOME_JOINT_SPEED)
