@@ -154,6 +154,8 @@ def test_episodes_recorded_before_versions_were_kept_count_as_that_version(tmp_p
     from rmbench.tasks.registry import recorded_gym_id
 
     assert recorded_gym_id("battery_try", {}) == "rmbench/BatteryTry-v1"
+    assert recorded_gym_id("swap_blocks", {}) == "rmbench/SwapBlocks-v1"
+    assert recorded_gym_id("swap_blocks", {"gym_id": "rmbench/SwapBlocks-v2"}) == "rmbench/SwapBlocks-v2"
     (tmp_path / "episodes.jsonl").write_text('{"seed": 1}\n')
     with pytest.raises(EvalError, match="holds episodes of rmbench/BatteryTry-v1, this"):
         _check_version(tmp_path, "battery_try")
