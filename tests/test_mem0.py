@@ -253,6 +253,45 @@ def test_planner_learns_the_demonstrated_order(mn_dataset, tmp_path):
     assert report["train_accuracy"] >= 0.9, report
 
 
+def test_no_key_beside_mem0s_executor_is_the_checkpoint_a_full_run_writes(mn_dataset, tmp_path,
+                                                                         interrupt_training):
+    """no_key changes the planner alone: its checkpoint, made from Mem-0's executor and a
+    planner fitted anew, is the one its own full training writes, bit for bit."""
+    from safetensors.torch import load_file
+
+    no_key = replace(TINY, ablations=("no_key",))
+    run = TrainConfig(steps=4, batch_size=4, save_every=4, log_every=1)
+    train_mem0(mn_dataset, tmp_path / "full", no_key, run, progress=False)
+    train_mem0(mn_dataset, tmp_path / "mem0", TINY, run, progress=False)
+    result = train_mem0(mn_dataset, tmp_path / "beside", no_key, run, progress=False,
+                        executor_from=tmp_path / "mem0")
+    assert result["executor_from"] == str((tmp_path / "mem0").resolve())
+    full = load_file(tmp_path / "full" / "model.safetensors")
+    beside = load_file(tmp_path / "beside" / "model.safetensors")
+    assert full.keys() == beside.keys()
+    for k in full:
+        assert torch.equal(full[k], beside[k]), k
+    config = read_config(tmp_path / "beside")
+    assert config.pop("executor_from") == result["executor_from"]
+    assert config == read_config(tmp_path / "full")
+    planner = [json.loads((tmp_path / r / "training" / "planner.json").read_text())
+               for r in ("full", "beside")]
+    assert planner[0] == planner[1]
+    # another seed's run, an unfinished one, or an ablation that changes the executor: refused
+    with pytest.raises(TrainingError, match="not the executor run"):
+        train_mem0(mn_dataset, tmp_path / "x", no_key, replace(run, seed=1), progress=False,
+                   executor_from=tmp_path / "mem0")
+    longer = replace(run, steps=8)
+    interrupt_training(lambda: train_mem0(mn_dataset, tmp_path / "part", TINY, longer,
+                                          progress=False))
+    with pytest.raises(TrainingError, match="has trained 4 of 8 steps"):
+        train_mem0(mn_dataset, tmp_path / "y", no_key, longer, progress=False,
+                   executor_from=tmp_path / "part")
+    with pytest.raises(ValueError, match="trains its own"):
+        train_mem0(mn_dataset, tmp_path / "z", replace(TINY, ablations=("no_anchor",)), run,
+                   progress=False, executor_from=tmp_path / "mem0")
+
+
 def test_resume_gives_the_weights_of_an_uninterrupted_run(mn_dataset, tmp_path,
                                                           interrupt_training):
     from safetensors.torch import load_file

@@ -23,6 +23,7 @@ from rmbench.suite.plan import (
     bounded,
     check_sets,
     config_for,
+    executor_spec,
     memory_of,
     parse_policy,
     recipe_of,
@@ -161,6 +162,13 @@ def test_jobs_wait_for_what_they_read(tmp_path):
     # the classifier ablation evaluates Mem-0's checkpoint: one training job for both
     assert needs[J("eval", "press_button", "mem0:gt_classifier")] == (train,)
     assert sorted(j.kind for j in needs) == ["collect", "eval", "eval", "eval", "train", "train"]
+    # no_key takes Mem-0's executor (of its own training seed): that training first, even when
+    # the table does not ask for Mem-0's column
+    needs = runner.plan_jobs(Plan("state", ("press_button",), ("mem0:no_key@1",)), tmp_path)
+    mem0, no_key = J("train", "press_button", "mem0@1"), J("train", "press_button", "mem0:no_key@1")
+    assert needs[mem0] == (collect,) and needs[no_key] == (collect, mem0)
+    assert executor_spec("mem0:no_key@1") == "mem0@1" and executor_spec("mem0:no_anchor") is None
+    assert executor_spec("mem0:no_anchor+no_key") == "mem0:no_anchor"
 
 
 @pytest.fixture(scope="module")

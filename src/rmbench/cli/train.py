@@ -12,7 +12,8 @@ from rmbench.cli.common import add_json
 
 def run_training(policy: str, dataset: str, out: str, *, steps: int, batch_size: int, device: str,
                  seed: int, save_every: int, ablations: list[str], overrides: list[str],
-                 workers: int = 0, progress: bool = True) -> dict[str, Any]:
+                 workers: int = 0, progress: bool = True,
+                 executor_from: str | None = None) -> dict[str, Any]:
     # Imported here: torch takes seconds to import, and only training needs it.
     from rmbench.policies.config import parse_overrides
     from rmbench.policies.trainable import trainable
@@ -29,19 +30,21 @@ def run_training(policy: str, dataset: str, out: str, *, steps: int, batch_size:
             raise ValueError(f"--ablation {bad[0]} is not a training ablation; training "
                              f"ablations: {', '.join(TRAINED_ABLATIONS)} (gt_classifier is "
                              f"chosen at evaluation: mem0:CKPT?ablation=gt_classifier)")
-    elif ablations:
-        raise ValueError(f"--ablation is Mem-0's; {policy} has none")
+    elif ablations or executor_from:
+        raise ValueError(f"--ablation and --executor-from are Mem-0's; {policy} has neither")
     cfg = config_cls(**parse_overrides(config_cls, overrides))
     if ablations:
         cfg = replace(cfg, ablations=tuple(ablations))
-    return fit(dataset, out, cfg, train_cfg, progress=progress, workers=workers)
+    extra = {} if executor_from is None else {"executor_from": executor_from}
+    return fit(dataset, out, cfg, train_cfg, progress=progress, workers=workers, **extra)
 
 
 def cmd_train(args) -> int:
     result = run_training(args.policy, args.dataset, args.out, steps=args.steps,
                           batch_size=args.batch_size, device=args.device, seed=args.seed,
                           save_every=args.save_every, ablations=args.ablation or [],
-                          overrides=args.set or [], workers=args.workers, progress=not args.json)
+                          overrides=args.set or [], workers=args.workers, progress=not args.json,
+                          executor_from=args.executor_from)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -62,6 +65,10 @@ def add_parsers(sub) -> None:
     p.add_argument("--save-every", type=int, default=500)
     p.add_argument("--ablation", action="append",
                    help="Mem-0 only: no_anchor | no_sliding | no_memory | no_key (repeatable)")
+    p.add_argument("--executor-from", metavar="CKPT",
+                   help="Mem-0 with --ablation no_key only: fit the planner alone and take the "
+                        "executor of CKPT, the finished run with the same arguments but no_key "
+                        "(the checkpoint a full run would write, for the planner's cost)")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE",
                    help="override a config field, VALUE as JSON (e.g. --set dim=64)")
     p.add_argument("--workers", type=int, default=0, help="data-loading processes")

@@ -4,8 +4,10 @@ trains with, and where each cell's data, checkpoint and evaluation live.
 A policy column is a spec: ``mem0``, ``mem0:ABLATION[+ABLATION...]``, ``dp`` or ``act``, each
 optionally ``@SEED``, the training seed (``mem0:no_key@1``; no suffix is seed 0). A column
 trained with several seeds (``--train-seeds 0,1``) reads as their mean. Mem-0's
-trained ablations (``no_anchor``, ``no_sliding``, ``no_memory``, ``no_key``) train their own
-checkpoint; ``gt_classifier`` changes only inference, so ``mem0:gt_classifier`` evaluates the
+trained ablations (``no_anchor``, ``no_sliding``, ``no_memory``) train their own
+checkpoint; ``no_key`` changes the planner alone, so its checkpoint is the ``mem0`` one's
+executor beside a planner fitted without key frames (what its own full training writes, bit
+for bit); ``gt_classifier`` changes only inference, so ``mem0:gt_classifier`` evaluates the
 ``mem0`` checkpoint. ``no_key`` and ``gt_classifier`` concern the planner and the subtask-end
 classifier, which an M(1) task (one subtask: the goal) does not have: those columns are left
 out of M(1) rows, as in the published ablation table.
@@ -86,6 +88,18 @@ def trained_spec(spec: str) -> str:
     """The spec whose checkpoint ``spec`` evaluates: ``mem0:gt_classifier@1`` -> ``mem0@1``."""
     name, trained, _ = parse_policy(spec)
     return with_seed(name + (":" + "+".join(trained) if trained else ""), split_seed(spec)[1])
+
+
+def executor_spec(spec: str) -> str | None:
+    """The spec whose trained executor ``spec``'s checkpoint takes (``mem0:no_key@1`` ->
+    ``mem0@1``: ``no_key`` changes the planner alone), or None where it trains its own."""
+    from rmbench.policies.mem0.config import PLANNER_ABLATIONS
+
+    name, trained, _ = parse_policy(spec)
+    kept = tuple(a for a in trained if a not in PLANNER_ABLATIONS)
+    if kept == trained:
+        return None
+    return with_seed(name + (":" + "+".join(kept) if kept else ""), split_seed(spec)[1])
 
 
 def applies(spec: str, tmc: str) -> bool:

@@ -63,6 +63,8 @@ def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
     out["boundaries"] = summarize(read_records(Path(row["evaluation"]) / task / "episodes.jsonl"))
     planner = Path(row["checkpoint"]) / "training" / "planner.json"  # M(n) checkpoints only
     out["planner"] = json.loads(planner.read_text()) if planner.exists() else None
+    if row.get("executor_from"):  # a planner-only ablation: its executor is this run's
+        out["executor_of"] = Path(row["executor_from"]).name
     config = Path(row["checkpoint"]) / "config.json"
     if out["planner"] is None and config.exists():  # a planner refit keeps its report there
         out["planner"] = (json.loads(config.read_text()).get("planner_refit") or {}).get("report")

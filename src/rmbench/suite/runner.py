@@ -1,5 +1,6 @@
 """Running a table: the jobs still missing, in dependency order (a task's collection before
-its cells' training, a checkpoint before its evaluations), ``jobs`` at a time on local worker
+its cells' training, Mem-0's training before a planner-only ablation's, a checkpoint before
+its evaluations), ``jobs`` at a time on local worker
 processes or on Ray, with a progress grid across the whole table.
 
 Each job is a fresh process (``python -m rmbench.suite.job``) with ``cores / jobs`` torch
@@ -27,7 +28,7 @@ from typing import TextIO
 from rmbench.machine import usable_cores
 from rmbench.suite import stages
 from rmbench.suite.job import run_job, source_digest
-from rmbench.suite.plan import Plan, trained_spec
+from rmbench.suite.plan import Plan, executor_spec, trained_spec
 
 BACKENDS = ("local", "ray")
 PRIORITY = {"collect": 0, "eval": 1, "train": 2}  # unblock others first, results early
@@ -64,7 +65,12 @@ def plan_jobs(plan: Plan, out: Path) -> dict[Job, tuple[Job, ...]]:
                 fresh = not stages.collected(plan, out, task)
             if fresh:
                 needs.setdefault(collect, ())
-            needs.setdefault(train, (collect,) if fresh else ())
+            first = (collect,) if fresh else ()
+            source = executor_spec(train.spec)  # (no_key: Mem-0's executor first)
+            if source is not None and not stages.trained(plan, out, task, source):
+                needs.setdefault(Job("train", task, source), first)
+                first = (*first, Job("train", task, source))
+            needs.setdefault(train, first)
             needs[Job("eval", task, spec)] = (train,)
     return needs
 

@@ -26,6 +26,7 @@ from rmbench.suite.plan import (
     COLLECT_CAMERAS,
     Plan,
     config_for,
+    executor_spec,
     memory_of,
     parse_policy,
     split_seed,
@@ -253,7 +254,8 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
 
 def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = False) -> Path:
     """The cell's checkpoint (its trained spec's: ``mem0:gt_classifier`` trains ``mem0``),
-    resumed from its last saved state; a finished one is left alone."""
+    resumed from its last saved state; a finished one is left alone. A planner-only ablation
+    (``mem0:no_key``) takes the finished executor of its ``executor_spec`` (``mem0``)."""
     from rmbench.policies.trainable import trainable
 
     folder = plan.train_dir(out, task, spec)
@@ -263,8 +265,12 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
         train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=split_seed(spec)[1],
                                 save_every=min(500, plan.steps), device=plan.device)
         _, fit = trainable(parse_policy(spec)[0])
-        result = fit(plan.train_data_dir(out, task), folder, cfg, train_cfg, progress=progress)
-        timing = {k: result[k] for k in ("train_wall_s", "train_wall_from_step", "machines")}
+        source = executor_spec(spec)
+        extra = {} if source is None else {"executor_from": plan.train_dir(out, task, source)}
+        result = fit(plan.train_data_dir(out, task), folder, cfg, train_cfg, progress=progress,
+                     **extra)
+        timing = {k: result[k] for k in ("train_wall_s", "train_wall_from_step", "machines",
+                                         "executor_from") if k in result}
         write_atomic(folder / TIMING, (json.dumps(timing, indent=1) + "\n").encode())
     return folder
 
@@ -325,6 +331,9 @@ def result_row(result: dict[str, Any], task: str, ckpt: Path, evals: Path,
             "machines": {"train": train_timing.get("machines", []),
                          "eval": eval_timing.get("machines", [])},
             "checkpoint": str(ckpt), "evaluation": str(evals),
+            # a planner-only ablation's train wall is its planner's; its executor trained here
+            **({"executor_from": train_timing["executor_from"]}
+               if train_timing.get("executor_from") else {}),
             **({"gym_id": result["gym_id"]} if result.get("gym_id") else {})}  # (older summaries)
 
 

@@ -109,6 +109,14 @@ def _run_fields(cfg: TrainConfig) -> dict[str, Any]:
     return {k: v for k, v in asdict(cfg).items() if k not in PLACE_FIELDS}
 
 
+def run_identity(describe: dict[str, Any], cfg: TrainConfig, world: int = 1) -> dict:
+    """What a run is, as its saved state records it and a resume must match: the checkpoint's
+    description, the training settings and the number of processes; as JSON stores it
+    (tuples become lists), so that a resume compares like with like."""
+    return json.loads(json.dumps({"describe": describe, "train": _run_fields(cfg),
+                                  "world": world}))
+
+
 def _placeless(identity: dict) -> dict:
     """``identity`` without where the run trained: its device (named by states saved before it
     was left out) and its dataset's folder (kept in the checkpoint's description)."""
@@ -177,9 +185,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     opt = torch.optim.AdamW([{"params": g["params"], "lr": g["lr"], "name": g["name"],
                               "base_lr": g["lr"], "min_lr": g["min_lr"]} for g in groups],
                             betas=(0.9, 0.999), weight_decay=cfg.weight_decay, foreach=True)
-    # as JSON stores it (tuples become lists), so that a resume compares like with like
-    identity = json.loads(json.dumps({"describe": describe, "train": _run_fields(cfg),
-                                      "world": dist.world}))
+    identity = run_identity(describe, cfg, dist.world)
     defaults = json.loads(json.dumps(config_defaults or {}))
     kept = _resume(out, model, opt, identity, defaults, device)
     start = kept.step
@@ -274,19 +280,8 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
         if (out / "config.json").exists() or (out.exists() and any(out.iterdir())):
             raise TrainingError(f"{out} exists and holds no training state; use another --out")
         return Kept()
-    try:
-        state = torch.load(path, map_location=device, weights_only=True)
-    except Exception as err:
-        raise TrainingError(f"{path}: unreadable training state ({type(err).__name__}: "
-                            f"{str(err).splitlines()[0] if str(err) else ''})") from None
-    saved = json.loads(state["identity"])
-    if isinstance(saved.get("describe", {}).get("config"), dict):
-        saved["describe"]["config"] = {**config_defaults, **saved["describe"]["config"]}
-        if "gym_id" in identity.get("describe", {}) and "task" in saved["describe"]:
-            # a run saved before checkpoints recorded their task version resumes on its own
-            saved["describe"]["gym_id"] = recorded_gym_id(saved["describe"]["task"],
-                                                           saved["describe"])
-    what = differences(_placeless(saved), _placeless(identity))
+    state = _read_state(out, device)
+    what = run_differences(json.loads(state["identity"]), identity, config_defaults)
     if what:
         raise TrainingError(f"{out} holds a training run with other arguments ({what}); "
                             f"use another --out")
@@ -303,6 +298,39 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
         return Kept(step, 0.0, step)
     return Kept(step, float(state["wall_s"]), int(state["wall_from"]),
                 tuple(json.loads(state["machines"])))
+
+
+def _read_state(out: Path, device: torch.device | str = "cpu") -> dict:
+    path = Path(out) / STATE
+    try:
+        return torch.load(path, map_location=device, weights_only=True)
+    except FileNotFoundError:
+        raise TrainingError(f"{out}: no training state ({STATE})") from None
+    except Exception as err:
+        raise TrainingError(f"{path}: unreadable training state ({type(err).__name__}: "
+                            f"{str(err).splitlines()[0] if str(err) else ''})") from None
+
+
+def saved_run(out: str | Path) -> tuple[dict, int]:
+    """The identity (``describe``, training settings, world size) and step of the training
+    run saved in ``out``; a TrainingError where it holds none."""
+    state = _read_state(Path(out))
+    return json.loads(state["identity"]), int(state["step"])
+
+
+def run_differences(saved: dict, identity: dict, config_defaults: dict | None = None) -> str:
+    """What a saved run's identity and ``identity`` differ in, aside from where each trained
+    ('' when nothing): a config field saved before it existed reads as its default
+    (``config_defaults``), a run saved before checkpoints recorded their task version as the
+    version of that time."""
+    saved = json.loads(json.dumps(saved))
+    defaults = json.loads(json.dumps(config_defaults or {}))
+    if isinstance(saved.get("describe", {}).get("config"), dict):
+        saved["describe"]["config"] = {**defaults, **saved["describe"]["config"]}
+        if "gym_id" in identity.get("describe", {}) and "task" in saved["describe"]:
+            saved["describe"]["gym_id"] = recorded_gym_id(saved["describe"]["task"],
+                                                           saved["describe"])
+    return differences(_placeless(saved), _placeless(identity))
 
 
 def _append_curve(out: Path, rows: list[dict], step: int) -> None:

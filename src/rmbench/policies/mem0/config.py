@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 from rmbench.policies.action_space import action_dim
@@ -13,6 +13,10 @@ from rmbench.policies.observation import ReadsObservation, check_observation
 # only change inference (any checkpoint can run them).
 TRAINED_ABLATIONS = ("no_anchor", "no_sliding", "no_memory", "no_key")
 INFERENCE_ABLATIONS = ("gt_classifier",)
+# Trained ablations that change the planner alone: the executor trains the same computation
+# without them (the planner is fitted first, frozen, and read by no executor loss), so such a
+# checkpoint can pair the executor of the one without them with a planner fitted anew.
+PLANNER_ABLATIONS = ("no_key",)
 ABLATIONS = TRAINED_ABLATIONS + INFERENCE_ABLATIONS
 END_CLASSIFIERS = ("event", "context")
 
@@ -260,3 +264,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
 
     def trained_ablations(self) -> tuple[str, ...]:
         return tuple(a for a in self.ablations if a in TRAINED_ABLATIONS)
+
+    def executor_config(self) -> Mem0Config:
+        """This config without its planner-only ablations: the one whose executor this one
+        trains, step for step."""
+        return replace(self, ablations=tuple(a for a in self.ablations
+                                             if a not in PLANNER_ABLATIONS))

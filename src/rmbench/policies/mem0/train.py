@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import logging
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -19,11 +20,12 @@ from rmbench.data import layout as L
 from rmbench.data.layout_shift import COPIES_SEED, add_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
+from rmbench.machine import describe as describe_machine
 from rmbench.policies.action_space import EE_DIM, EEActions
-from rmbench.policies.checkpoint import save_checkpoint, saved_step
+from rmbench.policies.checkpoint import load_weights, save_checkpoint, saved_step
 from rmbench.policies.feature_cache import FeatureCache, with_features
 from rmbench.policies.mem0.classifier import end_labels, event_labels
-from rmbench.policies.mem0.config import Mem0Config
+from rmbench.policies.mem0.config import PLANNER_ABLATIONS, Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
 from rmbench.policies.mem0.planner import DONE, PlannerExample, planner_examples, planner_loss
 from rmbench.policies.nn.normalize import Normalizer
@@ -32,7 +34,16 @@ from rmbench.policies.nn.vision import color_jitter
 from rmbench.policies.observation import choose, set_state_stats
 from rmbench.tasks import get_task
 from rmbench.training.batches import batch_stream
-from rmbench.training.loop import STATE, TrainConfig, lr_at, train
+from rmbench.training.loop import (
+    STATE,
+    TrainConfig,
+    TrainingError,
+    lr_at,
+    run_differences,
+    run_identity,
+    saved_run,
+    train,
+)
 from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
@@ -92,11 +103,21 @@ def build_model(cfg: Mem0Config, describe: dict[str, Any], text_vectors=None) ->
 
 
 def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg: TrainConfig,
-               progress: bool = True, workers: int = 0) -> dict[str, Any]:
+               progress: bool = True, workers: int = 0,
+               executor_from: str | Path | None = None) -> dict[str, Any]:
+    """Fit the planner (M(n) tasks), then train the executor; or, with ``executor_from`` (a
+    finished run of ``cfg.executor_config()``, for a planner-only ablation such as no_key),
+    fit the planner alone and take that run's executor: the checkpoint a full run would
+    write, for the planner's cost."""
+    t0 = time.perf_counter()
     ds = Dataset(dataset)
     task = get_task(ds.task)
     cfg = replace(cfg, observation=choose(cfg.observation, ds))
     decompose = task.tmc == "M(n)"
+    if executor_from is not None and (not decompose or cfg.executor_config() == cfg):
+        raise ValueError(f"an executor is taken from another run only for a planner-only "
+                         f"ablation ({', '.join(PLANNER_ABLATIONS)}) on an M(n) task; "
+                         f"{task.name} with ablations {list(cfg.ablations)} trains its own")
     goal = goal_text(task.name)
     executor_texts = list(ds.subtasks) + [goal]
     planner_texts = list(ds.subtasks) + [DONE]
@@ -138,6 +159,9 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     planner_report = None
     if decompose and not (out / STATE).exists():
         planner_report = fit_planner(model, ds, cfg, train_cfg, planner_texts.index(DONE), progress)
+    if executor_from is not None:
+        return _beside_executor(Path(executor_from), model, out, describe, train_cfg,
+                                planner_report, time.perf_counter() - t0)
     trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed,
                           describe.get("state_names", ()))
     # kept in the training state, so a run interrupted after the planner's fit still reports it
@@ -155,6 +179,34 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         write_atomic(out / "training" / "planner.json",
                      (json.dumps(trainer.planner_report, indent=2) + "\n").encode())
     return result
+
+
+def _beside_executor(source: Path, model: Mem0Model, out: Path, describe: dict[str, Any],
+                     train_cfg: TrainConfig, planner_report: dict, wall_s: float) -> dict[str, Any]:
+    """Write ``out``'s checkpoint: ``model``'s freshly fitted planner beside the executor of
+    ``source``, a finished run of the same description and settings but for the planner-only
+    ablations (a TrainingError naming what differs otherwise)."""
+    cfg = model.cfg
+    executor_describe = {**describe, "config": cfg.executor_config().to_dict()}
+    saved, step = saved_run(source)
+    defaults = type(cfg)().to_dict()
+    what = run_differences(saved, run_identity(executor_describe, train_cfg, saved.get("world", 1)),
+                           defaults)
+    if what:
+        raise TrainingError(f"{source} is not the executor run of this one ({what})")
+    if step != train_cfg.steps:
+        raise TrainingError(f"{source} has trained {step} of {train_cfg.steps} steps; finish it "
+                            f"first")
+    trained = build_model(cfg.executor_config(), saved["describe"])
+    load_weights(source, trained, step)
+    model.executor.load_state_dict(trained.executor.state_dict())
+    here = describe_machine()
+    save_checkpoint(out, model, {**describe, "executor_from": str(source.resolve())}, step)
+    write_atomic(out / "training" / "planner.json",
+                 (json.dumps(planner_report, indent=2) + "\n").encode())
+    return {"steps": step, "resumed_from": 0, "wall_s": round(wall_s, 1),
+            "train_wall_s": round(wall_s, 1), "train_wall_from_step": 0, "machines": [here],
+            "executor_from": str(source.resolve())}
 
 
 def to_pose_actions(frames: Mem0Frames, stats, horizon: int) -> Normalizer:
