@@ -3,7 +3,8 @@ policy with a frozen backbone (``backbone`` in its config) trains without runnin
 
 Each (episode, camera) is the frame cache's frames (the decoded frames resized to the policy's
 image size by the antialiased resize the closed loop uses too; not stored for this) through
-the backbone up to its feature map at the stride: float32 (T, C, h, w) in ``DATASET/.cache/
+the backbone up to its feature map at the stride: float16 (T, C, h, w), read back as float32
+(``backbone.FEATURE_DTYPE``: the closed loop rounds its features alike), in ``DATASET/.cache/
 features-v<FEATURES_VERSION>-<backbone>-s<stride>-<W>x<H>/<camera>/``. The frame cache's rules
 hold: a file is written under a temporary name and renamed into place, and its name carries the
 video file's size and modification time, so a dataset collected anew into the same folder is
@@ -34,9 +35,11 @@ FEATURES_PREFIX = "observation.features."
 # frames per backbone call: small batches run fastest on a CPU core, and up to 8 gave the
 # closed loop's single-step features bit for bit where measured
 ENCODE_BATCH = 8
-# Bumped when the encoding's arithmetic changes (2: batch norms folded, ``FoldedLite0``), so that
-# a cache is never read beside features computed another way at run time.
-FEATURES_VERSION = 2
+# Bumped when the encoding's arithmetic changes (2: batch norms folded, ``FoldedLite0``; 3:
+# stored as float16), so that a cache is never read beside features computed another way at
+# run time.
+FEATURES_VERSION = 3
+STORED = np.float16  # ``backbone.FEATURE_DTYPE`` as numpy stores it
 
 
 def features_key(camera: str) -> str:
@@ -61,7 +64,7 @@ class FeatureCache:
         return cache_file(self.dir, self.ds, episode, camera)
 
     def features(self, episode: int, camera: str) -> np.ndarray:
-        """(T, C, h, w) float32, memory-mapped; encoded first if the cache lacks them."""
+        """(T, C, h, w) float16, memory-mapped; encoded first if the cache lacks them."""
         key = (episode, camera)
         if key not in self._open:
             self._open[key] = self._ensure(episode, camera)
@@ -91,7 +94,7 @@ class FeatureCache:
             array = self._read(path, episode)
             if array is None:
                 raise OSError(f"{path}: written, but does not read back as "
-                              f"{self._expected(episode)} float32")
+                              f"{self._expected(episode)} {np.dtype(STORED).name}")
         return array
 
     def _expected(self, episode: int) -> tuple[int, ...]:
@@ -105,13 +108,13 @@ class FeatureCache:
             array = np.load(path, mmap_mode="r")
         except (OSError, ValueError, EOFError):
             return None
-        if array.shape != self._expected(episode) or array.dtype != np.float32:
+        if array.shape != self._expected(episode) or array.dtype != STORED:
             return None
         return array
 
     def _encode(self, episode: int, camera: str, path: Path) -> None:
         frames = FrameCache(self.ds, self.size).read_once(episode, camera)
-        out = np.empty((len(frames), *self.shape), dtype=np.float32)
+        out = np.empty((len(frames), *self.shape), dtype=STORED)
         for i in range(0, len(frames), ENCODE_BATCH):
             images = torch.from_numpy(np.array(frames[i:i + ENCODE_BATCH])).permute(0, 3, 1, 2)
             out[i:i + ENCODE_BATCH] = backbone_features(self.backbone, self.stride, images).numpy()
@@ -145,7 +148,7 @@ class FeatureFrames(torch.utils.data.Dataset):
         for cam in self.cameras:
             batch[features_key(cam)] = torch.from_numpy(np.stack([
                 self.cache.features(self.frames.episode_ids[j], cam)[self.frames.observed(int(f))]
-                for j, f in zip(k, t, strict=True)]))
+                for j, f in zip(k, t, strict=True)])).float()
         return batch
 
 

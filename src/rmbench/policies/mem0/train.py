@@ -295,7 +295,7 @@ def planner_frames(ds: Dataset, cfg: Mem0Config) -> PlannerFrames:
         features = FeatureCache(ds, cfg.backbone, cfg.backbone_stride, cfg.image_size)
 
         def cached(e: int, ts: list[int], gen) -> list[torch.Tensor]:
-            return [torch.from_numpy(np.array(features.features(e, cam)[ts]))
+            return [torch.from_numpy(np.array(features.features(e, cam)[ts])).float()
                     for cam in cfg.planner_cameras]
 
         return cached
