@@ -19,6 +19,7 @@ from rmbench.data.torch_dataset import FrameCache  # noqa: E402
 from rmbench.envs.registration import make  # noqa: E402
 from rmbench.policies import feature_cache  # noqa: E402
 from rmbench.policies.act.agent import ACTPolicy, train_act  # noqa: E402
+from rmbench.policies.checkpoint import CheckpointError  # noqa: E402
 from rmbench.policies.dp.agent import DPPolicy, train_dp  # noqa: E402
 from rmbench.policies.dp.config import DPConfig  # noqa: E402
 from rmbench.policies.feature_cache import FeatureCache  # noqa: E402
@@ -165,6 +166,14 @@ def test_mem0_trains_on_cached_features_and_round_trips(mn_dataset, tmp_path, mo
     # with the cache written, training neither runs the backbone nor reads a frame
     forbid_encoding(monkeypatch)
     train_mem0(mn_dataset, tmp_path / "b", cfg, TrainConfig(**args), progress=False)
+
+    # a checkpoint trained on features of another version is refused at load, in one line
+    config = json.loads((tmp_path / "a" / "config.json").read_text())
+    assert config["features_version"] == feature_cache.FEATURES_VERSION
+    del config["features_version"]  # as checkpoints trained on float32 features (v2) were
+    (tmp_path / "a" / "config.json").write_text(json.dumps(config))
+    with pytest.raises(CheckpointError, match="features of version 2 or earlier"):
+        Mem0Policy(str(tmp_path / "a"))
 
 
 @pytest.mark.parametrize("name", ["dp", "act"])

@@ -42,6 +42,27 @@ FEATURES_VERSION = 3
 STORED = np.float16  # ``backbone.FEATURE_DTYPE`` as numpy stores it
 
 
+def features_record(cfg) -> dict[str, int]:
+    """What a checkpoint's description records of the features it trained on (with a frozen
+    backbone): their version, which a resume must match and a load checks."""
+    return {"features_version": FEATURES_VERSION} if cfg.reads_features else {}
+
+
+def check_features(folder, describe: dict, cfg) -> None:
+    """A checkpoint trained on cached features of another version than this rmbench computes
+    at run time is refused (its inputs would differ from its training's)."""
+    if not cfg.reads_features:
+        return
+    trained = describe.get("features_version", 2)  # (recorded from version 3 on)
+    if trained != FEATURES_VERSION:
+        from rmbench.policies.checkpoint import CheckpointError
+
+        raise CheckpointError(f"{folder} was trained on backbone features of version "
+                              f"{trained}{' or earlier' if 'features_version' not in describe else ''}"
+                              f", this rmbench computes version {FEATURES_VERSION} "
+                              f"(CHANGELOG.md): train it again")
+
+
 def features_key(camera: str) -> str:
     """A training batch's key for ``camera``'s cached features."""
     return FEATURES_PREFIX + camera

@@ -42,7 +42,12 @@ from rmbench.policies.checkpoint import (
     saved_step,
 )
 from rmbench.policies.config import PolicyConfig, parse_argument
-from rmbench.policies.feature_cache import features_key, with_features
+from rmbench.policies.feature_cache import (
+    check_features,
+    features_key,
+    features_record,
+    with_features,
+)
 from rmbench.policies.nn.backbone import camera_encoders
 from rmbench.policies.nn.inference import inference
 from rmbench.policies.nn.normalize import Normalizer
@@ -209,7 +214,7 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
     describe = {"policy": policy, "config": cfg.to_dict(), "task": task.name, "tmc": task.tmc,
                 "gym_id": ds.gym_id,
                 "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
-                            "frames": ds.num_frames}}
+                            "frames": ds.num_frames}, **features_record(cfg)}
     if cfg.reads_state:
         describe["state_names"] = ds.state_names
     missing = [] if cfg.reads_state else sorted(set(cfg.cameras) - set(ds.cameras))
@@ -279,6 +284,7 @@ class VisuomotorPolicy(BasePolicy):
         model = self.model_cls(cfg, len(describe.get("state_names") or ()))
         load_weights(path, model, describe["step"])
         check_task(path, describe, env)
+        check_features(path, describe, cfg)
         self._setup(model, describe)
 
     @classmethod

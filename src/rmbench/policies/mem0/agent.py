@@ -37,6 +37,7 @@ from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import CheckpointError, check_task, load_weights, read_config
 from rmbench.policies.config import parse_argument
 from rmbench.policies.ensemble import TemporalEnsemble
+from rmbench.policies.feature_cache import check_features
 from rmbench.policies.mem0.classifier import Debounce
 from rmbench.policies.mem0.config import TRAINED_ABLATIONS, Mem0Config
 from rmbench.policies.mem0.memory import EventWindow, MemoryStore
@@ -110,6 +111,7 @@ class Mem0Policy(BasePolicy):
         ablations = tuple(a for a in options.get("ablation", "").split(",") if a)
         model, cfg, describe = load_mem0(path, ablations, overrides)
         check_task(path, describe, env)
+        check_features(path, describe, cfg)
         self._setup(model, cfg, describe, env)
 
     @classmethod

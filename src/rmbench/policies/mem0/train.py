@@ -23,7 +23,7 @@ from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCa
 from rmbench.machine import describe as describe_machine
 from rmbench.policies.action_space import EE_DIM, EEActions
 from rmbench.policies.checkpoint import load_weights, save_checkpoint, saved_step
-from rmbench.policies.feature_cache import FeatureCache, with_features
+from rmbench.policies.feature_cache import FeatureCache, features_record, with_features
 from rmbench.policies.mem0.classifier import end_labels, event_labels
 from rmbench.policies.mem0.config import PLANNER_ABLATIONS, Mem0Config
 from rmbench.policies.mem0.modeling import Mem0Model, Mem0Trainer
@@ -129,6 +129,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         "text_encoder": "learned" if vectors is None else "minilm",
         "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
                     "frames": ds.num_frames},
+        **features_record(cfg),
     }
     if cfg.reads_state:
         describe["state_names"] = ds.state_names
