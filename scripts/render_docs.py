@@ -730,19 +730,26 @@ ROBUSTNESS_COLUMNS = [("white", 0.0), ("smooth", 0.01), ("smooth", 0.02), ("smoo
                       ("white", 0.03)]
 
 
+def _expert_mark(task: type, cell: dict) -> str:
+    """' ‡' for an expert cell run on an earlier version of its task."""
+    return " ‡" if recorded_gym_id(task.name, cell) != task.gym_id else ""
+
+
 def robustness() -> str:
     cells = _robustness_cells()
     rows = []
     for task in ordered():
         row = [cells.get((task.name, k, s)) for k, s in ROBUSTNESS_COLUMNS]
-        rows.append([task.name] + [f"{rate(c)} ({c['episodes']})" if c else "-" for c in row])
+        rows.append([task.name] + [f"{rate(c)}{_expert_mark(task, c)} ({c['episodes']})" if c
+                                   else "-" for c in row])
     raised = sum(c["expert_raised"] for c in cells.values())
     episodes = sum(c["episodes"] for c in cells.values())
     wall = sum(c["wall_s"] for c in cells.values())
     head = [f"{k} {s:g}" if s else "no noise" for k, s in ROBUSTNESS_COLUMNS]
-    return (markdown(["task", *head], rows)
-            + f"\nEpisodes: {episodes}, in which an expert raised: {raised}; wall time of the "
-            f"{len(cells)} cells: {wall / 3600:.1f} h. In parentheses: episodes per cell.\n")
+    table = markdown(["task", *head], rows)
+    return (table + f"\nEpisodes: {episodes}, in which an expert raised: {raised}; wall time of "
+            f"the {len(cells)} cells: {wall / 3600:.1f} h. In parentheses: episodes per cell.\n"
+            + _footnote(table))
 
 
 def robustness_margin() -> str:
@@ -751,9 +758,11 @@ def robustness_margin() -> str:
     for task in ordered():
         c = cells[(task.name, "white", 0.0)]
         longest = c["longest_success_steps"]
-        rows.append([task.name, f"{c['successes']}/{c['episodes']}", f"{longest} steps", c["step_limit"],
-                     f"{c['step_limit'] / longest:.2f}x"])
-    return markdown(["task", "success", "longest successful episode", "step limit", "margin"], rows)
+        rows.append([task.name + _expert_mark(task, c), f"{c['successes']}/{c['episodes']}",
+                     f"{longest} steps", c["step_limit"], f"{c['step_limit'] / longest:.2f}x"])
+    table = markdown(["task", "success", "longest successful episode", "step limit", "margin"],
+                     rows)
+    return table + _footnote(table)
 
 
 def robustness_failures() -> str:
