@@ -171,6 +171,16 @@ def test_jobs_wait_for_what_they_read(tmp_path):
     assert executor_spec("mem0:no_anchor+no_key") == "mem0:no_anchor"
 
 
+def test_a_task_s_cells_start_before_the_next_task_s_data():
+    J = runner.Job
+    plan = Plan("pixels", ("put_back_block", "press_button"), ("mem0", "mem0:no_memory"))
+    order = runner.start_order(runner.plan_jobs(plan, Path("/nonexistent")))
+    assert order[0] == J("collect", "put_back_block")
+    kinds = [(j.task, j.kind) for j in order]
+    assert kinds.index(("put_back_block", "train")) < kinds.index(("press_button", "collect"))
+    assert kinds.index(("put_back_block", "eval")) < kinds.index(("put_back_block", "train"))
+
+
 @pytest.fixture(scope="module")
 def toy_table(tmp_path_factory):
     """A toy table, two jobs at a time: 2 demonstrations, 6 training steps, 1 episode."""

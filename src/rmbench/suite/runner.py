@@ -31,7 +31,16 @@ from rmbench.suite.job import run_job, source_digest
 from rmbench.suite.plan import Plan, executor_spec, trained_spec
 
 BACKENDS = ("local", "ray")
-PRIORITY = {"collect": 0, "eval": 1, "train": 2}  # unblock others first, results early
+PRIORITY = {"collect": 0, "eval": 1, "train": 2}  # within a task: unblock others, results early
+
+
+def start_order(needs: dict[Job, tuple[Job, ...]]) -> list[Job]:
+    """The jobs in the order a free slot takes the first ready one: task by task in the
+    table's order, and within a task collection, then evaluations, then trainings. A task's
+    cells thus finish before the next task's data is made, while a slot no earlier task can
+    use goes on with a later one (a camera table's data takes hours a task)."""
+    tasks = list(dict.fromkeys(j.task for j in needs))
+    return sorted(needs, key=lambda j: (tasks.index(j.task), PRIORITY[j.kind]))
 
 
 @dataclass(frozen=True)
@@ -252,7 +261,7 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
     needs = plan_jobs(plan, out)
     pool = (LocalJobs(max(1, usable_cores() // jobs)) if backend == "local"
             else RayJobs())
-    pending = sorted(needs, key=lambda j: PRIORITY[j.kind])  # stable: table order within
+    pending = start_order(needs)
     done: set[Job] = set()
     failed: dict[Job, str] = {}
     t0 = time.perf_counter()
