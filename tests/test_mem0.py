@@ -259,10 +259,11 @@ def test_no_key_beside_mem0s_executor_is_the_checkpoint_a_full_run_writes(mn_dat
     planner fitted anew, is the one its own full training writes, bit for bit."""
     from safetensors.torch import load_file
 
-    no_key = replace(TINY, ablations=("no_key",))
+    mem0 = replace(TINY, ema=True)  # the export averages weights: the frozen planner's stay
+    no_key = replace(mem0, ablations=("no_key",))
     run = TrainConfig(steps=4, batch_size=4, save_every=4, log_every=1)
     train_mem0(mn_dataset, tmp_path / "full", no_key, run, progress=False)
-    train_mem0(mn_dataset, tmp_path / "mem0", TINY, run, progress=False)
+    train_mem0(mn_dataset, tmp_path / "mem0", mem0, run, progress=False)
     result = train_mem0(mn_dataset, tmp_path / "beside", no_key, run, progress=False,
                         executor_from=tmp_path / "mem0")
     assert result["executor_from"] == str((tmp_path / "mem0").resolve())
@@ -277,18 +278,22 @@ def test_no_key_beside_mem0s_executor_is_the_checkpoint_a_full_run_writes(mn_dat
     planner = [json.loads((tmp_path / r / "training" / "planner.json").read_text())
                for r in ("full", "beside")]
     assert planner[0] == planner[1]
-    # another seed's run, an unfinished one, or an ablation that changes the executor: refused
+    # another seed's run, an unfinished one, an ablation that changes the executor, or a
+    # folder holding a run of its own: refused
+    with pytest.raises(TrainingError, match="holds a training run of its own"):
+        train_mem0(mn_dataset, tmp_path / "full", no_key, run, progress=False,
+                   executor_from=tmp_path / "mem0")
     with pytest.raises(TrainingError, match="not the executor run"):
         train_mem0(mn_dataset, tmp_path / "x", no_key, replace(run, seed=1), progress=False,
                    executor_from=tmp_path / "mem0")
     longer = replace(run, steps=8)
-    interrupt_training(lambda: train_mem0(mn_dataset, tmp_path / "part", TINY, longer,
+    interrupt_training(lambda: train_mem0(mn_dataset, tmp_path / "part", mem0, longer,
                                           progress=False))
     with pytest.raises(TrainingError, match="has trained 4 of 8 steps"):
         train_mem0(mn_dataset, tmp_path / "y", no_key, longer, progress=False,
                    executor_from=tmp_path / "part")
     with pytest.raises(ValueError, match="trains its own"):
-        train_mem0(mn_dataset, tmp_path / "z", replace(TINY, ablations=("no_anchor",)), run,
+        train_mem0(mn_dataset, tmp_path / "z", replace(mem0, ablations=("no_anchor",)), run,
                    progress=False, executor_from=tmp_path / "mem0")
 
 

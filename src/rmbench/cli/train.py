@@ -47,6 +47,9 @@ def cmd_train(args) -> int:
                           executor_from=args.executor_from)
     if args.json:
         print(json.dumps(result, indent=2))
+    elif result.get("executor_from"):
+        print(f"fitted {args.policy}'s planner beside the executor of {result['executor_from']} "
+              f"(step {result['steps']}); checkpoint in {args.out}")
     else:
         print(f"trained {args.policy} for {result['steps']} steps "
               f"(resumed from {result['resumed_from']}); checkpoint in {args.out}")
@@ -67,8 +70,9 @@ def add_parsers(sub) -> None:
                    help="Mem-0 only: no_anchor | no_sliding | no_memory | no_key (repeatable)")
     p.add_argument("--executor-from", metavar="CKPT",
                    help="Mem-0 with --ablation no_key only: fit the planner alone and take the "
-                        "executor of CKPT, the finished run with the same arguments but no_key "
-                        "(the checkpoint a full run would write, for the planner's cost)")
+                        "executor of CKPT, the finished training folder (with its "
+                        "training/state.pt) of the same arguments but no_key: the checkpoint a "
+                        "full run would write, for the planner's cost, in a new --out")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE",
                    help="override a config field, VALUE as JSON (e.g. --set dim=64)")
     p.add_argument("--workers", type=int, default=0, help="data-loading processes")

@@ -82,7 +82,9 @@ def saved_step(folder: str | Path) -> int | None:
     return step if config.get("step") == step else None
 
 
-def load_weights(folder: str | Path, model: torch.nn.Module, step: int) -> None:
+def read_weights(folder: str | Path, step: int) -> dict[str, torch.Tensor]:
+    """The checkpoint's tensors by name, saved at ``step`` (a CheckpointError where they are
+    missing, corrupt or of another step)."""
     path = Path(folder) / WEIGHTS
     try:
         data = path.read_bytes()
@@ -95,6 +97,12 @@ def load_weights(folder: str | Path, model: torch.nn.Module, step: int) -> None:
     if saved_step != step:
         raise CheckpointError(f"{folder}: weights of step {saved_step} beside a config of step "
                               f"{step} (a save was interrupted); re-run training to resume")
+    return state
+
+
+def load_weights(folder: str | Path, model: torch.nn.Module, step: int) -> None:
+    path = Path(folder) / WEIGHTS
+    state = read_weights(folder, step)
     missing, unexpected = set(model.state_dict()) - set(state), set(state) - set(model.state_dict())
     if missing or unexpected:
         raise CheckpointError(f"{path}: weights do not fit the model (missing {sorted(missing)[:3]}, "

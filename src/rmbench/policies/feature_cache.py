@@ -27,7 +27,7 @@ import torch
 
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, FrameCache, cache_file, save_atomic
-from rmbench.policies.nn.backbone import backbone_features, feature_shape
+from rmbench.policies.nn.backbone import FEATURE_DTYPE, backbone_features, feature_shape
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +39,7 @@ ENCODE_BATCH = 8
 # stored as float16), so that a cache is never read beside features computed another way at
 # run time.
 FEATURES_VERSION = 3
-STORED = np.float16  # ``backbone.FEATURE_DTYPE`` as numpy stores it
+STORED = torch.empty(0, dtype=FEATURE_DTYPE).numpy().dtype  # as numpy stores it
 
 
 def features_record(cfg) -> dict[str, int]:

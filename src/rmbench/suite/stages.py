@@ -34,7 +34,7 @@ from rmbench.suite.plan import (
 )
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
-from rmbench.training.loop import CURVE_CSV, TrainConfig
+from rmbench.training.loop import CURVE_CSV, STATE, TrainConfig
 from rmbench.video import write_atomic
 
 TIMING = "timing.json"
@@ -266,7 +266,10 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
                                 save_every=min(500, plan.steps), device=plan.device)
         _, fit = trainable(parse_policy(spec)[0])
         source = executor_spec(spec)
-        extra = {} if source is None else {"executor_from": plan.train_dir(out, task, source)}
+        # (a folder holding a full run's state, started before no_key took Mem-0's executor,
+        # resumes as that run)
+        extra = ({} if source is None or (folder / STATE).exists()
+                 else {"executor_from": plan.train_dir(out, task, source)})
         result = fit(plan.train_data_dir(out, task), folder, cfg, train_cfg, progress=progress,
                      **extra)
         timing = {k: result[k] for k in ("train_wall_s", "train_wall_from_step", "machines",

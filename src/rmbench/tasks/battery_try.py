@@ -24,9 +24,9 @@ Failure: a battery off the table.
 Memory: TMC M(n). Aliasing point: the slots' contact plates hide the cells' ends from the
 head camera, so after a failed try the holder looks like after any other failed try; only the
 past tells which pairs were already tried. A try counts only with both arms home and settled
-(every arm joint within 0.02 rad of home), so the view after the inserts is that view too,
-arms included: nothing shows which arm moved last. Without memory, flipping either cell at
-random finds the pair
+(every arm joint within ``HOME_JOINT_TOL`` of home and slower than ``HOME_JOINT_SPEED``,
+``tasks/base.py``), so the view after the inserts is that view too, arms included: nothing
+shows which arm moved last. Without memory, flipping either cell at random finds the pair
 within the step limit 75% of the time (``eval/chance.py``).
 """
 

@@ -62,6 +62,7 @@ def load_mem0(path: str | Path, ablations: tuple[str, ...] = (),
                       **(overrides or {}))
     except (TypeError, ValueError) as err:
         raise CheckpointError(f"{path}: {err}") from None
+    check_features(path, describe, cfg)
     model = build_model(cfg, describe)
     load_weights(path, model, describe["step"])
     model.eval()
@@ -111,7 +112,6 @@ class Mem0Policy(BasePolicy):
         ablations = tuple(a for a in options.get("ablation", "").split(",") if a)
         model, cfg, describe = load_mem0(path, ablations, overrides)
         check_task(path, describe, env)
-        check_features(path, describe, cfg)
         self._setup(model, cfg, describe, env)
 
     @classmethod

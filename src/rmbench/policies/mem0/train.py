@@ -22,7 +22,7 @@ from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
 from rmbench.machine import describe as describe_machine
 from rmbench.policies.action_space import EE_DIM, EEActions
-from rmbench.policies.checkpoint import load_weights, save_checkpoint, saved_step
+from rmbench.policies.checkpoint import read_weights, save_checkpoint, saved_step
 from rmbench.policies.feature_cache import FeatureCache, features_record, with_features
 from rmbench.policies.mem0.classifier import end_labels, event_labels
 from rmbench.policies.mem0.config import PLANNER_ABLATIONS, Mem0Config
@@ -157,12 +157,14 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
             for encoder in encoders:
                 encoder.set_reach(ds.state_names, cfg.reach_input, env_states)
     out = Path(out)
+    if executor_from is not None:  # checked before the planner's fit, which it would waste
+        step = _executor_source(Path(executor_from), out, describe, cfg, train_cfg)
     planner_report = None
     if decompose and not (out / STATE).exists():
         planner_report = fit_planner(model, ds, cfg, train_cfg, planner_texts.index(DONE), progress)
     if executor_from is not None:
-        return _beside_executor(Path(executor_from), model, out, describe, train_cfg,
-                                planner_report, time.perf_counter() - t0)
+        return _beside_executor(Path(executor_from), step, model, out, describe, planner_report,
+                                time.perf_counter() - t0)
     trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed,
                           describe.get("state_names", ()))
     # kept in the training state, so a run interrupted after the planner's fit still reports it
@@ -182,32 +184,44 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     return result
 
 
-def _beside_executor(source: Path, model: Mem0Model, out: Path, describe: dict[str, Any],
-                     train_cfg: TrainConfig, planner_report: dict, wall_s: float) -> dict[str, Any]:
-    """Write ``out``'s checkpoint: ``model``'s freshly fitted planner beside the executor of
-    ``source``, a finished run of the same description and settings but for the planner-only
-    ablations (a TrainingError naming what differs otherwise)."""
-    cfg = model.cfg
-    executor_describe = {**describe, "config": cfg.executor_config().to_dict()}
+def _executor_source(source: Path, out: Path, describe: dict[str, Any], cfg: Mem0Config,
+                     train_cfg: TrainConfig) -> int:
+    """The step of ``source``, a finished training run of the same description and settings
+    as this one but for the planner-only ablations, whose executor ``out`` takes (a
+    TrainingError naming what differs otherwise, or where ``out`` holds a run of its own)."""
+    if (out / STATE).exists() or out.resolve() == source.resolve():
+        raise TrainingError(f"{out} holds a training run of its own; a checkpoint that takes "
+                            f"the executor of {source} needs a new --out")
     saved, step = saved_run(source)
-    defaults = type(cfg)().to_dict()
+    executor_describe = {**describe, "config": cfg.executor_config().to_dict()}
     what = run_differences(saved, run_identity(executor_describe, train_cfg, saved.get("world", 1)),
-                           defaults)
+                           type(cfg)().to_dict())
     if what:
         raise TrainingError(f"{source} is not the executor run of this one ({what})")
     if step != train_cfg.steps:
         raise TrainingError(f"{source} has trained {step} of {train_cfg.steps} steps; finish it "
                             f"first")
-    trained = build_model(cfg.executor_config(), saved["describe"])
-    load_weights(source, trained, step)
-    model.executor.load_state_dict(trained.executor.state_dict())
-    here = describe_machine()
-    save_checkpoint(out, model, {**describe, "executor_from": str(source.resolve())}, step)
+    return step
+
+
+def _beside_executor(source: Path, step: int, model: Mem0Model, out: Path,
+                     describe: dict[str, Any], planner_report: dict[str, Any] | None,
+                     wall_s: float) -> dict[str, Any]:
+    """Write ``out``'s checkpoint: ``model``'s freshly fitted planner beside the executor
+    ``source`` saved at ``step`` (checked by ``_executor_source``)."""
+    if planner_report is None:
+        raise TrainingError(f"{out}: no planner was fitted; a checkpoint beside another run's "
+                            f"executor is made for an M(n) task's planner-only ablation")
+    weights = read_weights(source, step)
+    model.executor.load_state_dict({k.removeprefix("executor."): v for k, v in weights.items()
+                                    if k.startswith("executor.")})
+    # the planner's report first: the checkpoint's config is what says the run is done
     write_atomic(out / "training" / "planner.json",
                  (json.dumps(planner_report, indent=2) + "\n").encode())
+    save_checkpoint(out, model, {**describe, "executor_from": str(source.resolve())}, step)
     return {"steps": step, "resumed_from": 0, "wall_s": round(wall_s, 1),
-            "train_wall_s": round(wall_s, 1), "train_wall_from_step": 0, "machines": [here],
-            "executor_from": str(source.resolve())}
+            "train_wall_s": round(wall_s, 1), "train_wall_from_step": 0,
+            "machines": [describe_machine()], "executor_from": str(source.resolve())}
 
 
 def to_pose_actions(frames: Mem0Frames, stats, horizon: int) -> Normalizer:
