@@ -431,6 +431,31 @@ def state_seeds() -> str:
                      "spread (points)"], rows)
 
 
+def state_failures() -> str:
+    """The rows where Mem-0 stays below the published Mem-0: where its failed episodes end,
+    by the plan's stage and how (``eval/endings.py``), per training seed whose records keep it."""
+    res = load("table_state.json")
+    rows, unkept = [], []
+    for task in ordered():
+        cell = res["cells"].get(task.name, {}).get("mem0")
+        if cell is None or 100 * cell["successes"] / cell["episodes"] >= PUBLISHED["Mem-0"][task.name]:
+            continue
+        label = task.name + _older(task.name, "mem0", cell)
+        kept = {k: r for k, r in seed_records(cell).items() if r.get("failed_at")}
+        if not kept:
+            unkept.append(label)
+        for seed, r in kept.items():
+            for stage, ends in r["failed_at"].items():
+                rows.append([label, f"{rate(cell)} ({PUBLISHED['Mem-0'][task.name]:g})", seed,
+                             stage or "(none)", sum(ends.values()),
+                             "; ".join(f"{e} {n}" for e, n in ends.items())])
+    table = markdown(["task", "Mem-0 (published)", "seed", "stage the episode ended in",
+                      "failed episodes", "how they ended"], rows)
+    note = (f"\nNot kept for {_and(unkept)}: evaluated before the results kept where failures "
+            "end.\n") if unkept else ""
+    return table + note + _footnote(table + note)
+
+
 def mn_recipe() -> str:
     """Mem-0's M(n) recipe candidates (``benchmarks/mn_recipe.py``), the first the table's
     recipe on format 1 data: each cell a rate with its interval, and for Mem-0 where its
@@ -930,7 +955,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "readme-results": readme_results, "state-policies": state_policies,
     "pixels-policies": pixels_policies, "pixels-ablations": pixels_ablations,
     "state-ablations": state_ablations, "state-differences": state_differences,
-    "state-seeds": state_seeds,
+    "state-seeds": state_seeds, "state-failures": state_failures,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,
     "state-records": state_records, "state-hardware": state_hardware,
     "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,

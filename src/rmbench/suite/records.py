@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.eval.boundaries import summarize
+from rmbench.eval.endings import failures_by_stage
 from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
 from rmbench.eval.report import Rate
@@ -60,7 +61,9 @@ def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
     rate = Rate.of(row)  # a row written before rates carried their counts has the rate alone
     out["successes"] = rate.successes
     out["success_ci95"] = [round(v, 4) for v in wilson(rate.successes, rate.episodes)]
-    out["boundaries"] = summarize(read_records(Path(row["evaluation"]) / task / "episodes.jsonl"))
+    records = read_records(Path(row["evaluation"]) / task / "episodes.jsonl")
+    out["boundaries"] = summarize(records)
+    out["failed_at"] = failures_by_stage(records)
     planner = Path(row["checkpoint"]) / "training" / "planner.json"  # M(n) checkpoints only
     out["planner"] = json.loads(planner.read_text()) if planner.exists() else None
     if row.get("executor_from"):  # a planner-only ablation: its executor is this run's
