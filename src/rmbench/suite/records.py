@@ -62,7 +62,8 @@ def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
     out["successes"] = rate.successes
     out["success_ci95"] = [round(v, 4) for v in wilson(rate.successes, rate.episodes)]
     records = read_records(Path(row["evaluation"]) / task / "episodes.jsonl")
-    out["boundaries"] = summarize(records)
+    # declared subtask ends against the simulator's: an M(1) task runs one subtask, the goal
+    out["boundaries"] = summarize(records) if get_task(task).tmc == "M(n)" else None
     out["failed_at"] = failures_by_stage(records)
     planner = Path(row["checkpoint"]) / "training" / "planner.json"  # M(n) checkpoints only
     out["planner"] = json.loads(planner.read_text()) if planner.exists() else None
