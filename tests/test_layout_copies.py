@@ -60,8 +60,15 @@ def test_each_demonstration_comes_back_unchanged_before_its_copies(noisy, copied
         for field in ("state", "action", "ee_pose", "environment_state", "progress",
                       "subtask_index", "subtask_end"):
             np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
-        for cam in src.cameras:  # the replay's frames are the recording's, bit for bit
+        for cam in src.cameras:  # the recording's videos and their statistics, as they are
             assert src.video_path(cam, e).read_bytes() == dst.video_path(cam, d).read_bytes()
+            a_stats, b_stats = src.image_stats(e)[cam], dst.image_stats(d)[cam]
+            assert a_stats.keys() == b_stats.keys() == {"min", "max", "mean", "std", "count"}
+            for k in a_stats:
+                np.testing.assert_array_equal(a_stats[k], b_stats[k])
+        # a drawn copy's statistics are its own frames'
+        assert not np.array_equal(src.image_stats(e)[src.cameras[0]]["mean"],
+                                  dst.image_stats(d + 1)[src.cameras[0]]["mean"])
 
 
 def test_a_copy_moves_every_position_and_the_arms_with_the_scene(noisy, copied):

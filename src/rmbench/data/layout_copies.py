@@ -10,8 +10,8 @@ each copy is drawn from a second ``MjData``: the recorded state with every scene
 by the copy's shift (free pieces through their joints, fixed ones through ``model.body_pos``,
 put back after the frame) and the arms at the copy's solved joints, the grippers as recorded.
 
-The output is an ordinary dataset: per source episode, the episode itself (copy 0, its frames
-the replay's own, so it equals the source) and then its kept copies, each committed through
+The output is an ordinary dataset: per source episode, the episode itself (copy 0: its rows,
+videos and image statistics the source's own) and then its kept copies, each committed through
 ``DatasetWriter`` with the copy's joints, actions, grasp poses, environment state and frames.
 Each copy's ``hidden`` adds ``layout_copy`` (source episode, copy number, shift); the task's
 own hidden entries are the source's. A copy out of the arms' reach is left out.
@@ -135,8 +135,9 @@ class Copier:
         self.source = str(source)
         self.src = Dataset(source)
         self.spec, self.noise = _recorded_as(self.src)
-        self.env = make(self.src.task, render=True, cameras=self.spec.cameras,
-                        width=self.spec.width, height=self.spec.height)
+        # physics alone: copy 0's frames are the source's own videos, the others are drawn by
+        # SceneShift (a render of the replay's frames would only draw copy 0 once more)
+        self.env = make(self.src.task, render=False)
         self.shifter, self.scene = LayoutShift(self.src.state_names), SceneShift(self.env)
         self.renderer = self.env.unwrapped.sim.renderer(self.spec.width, self.spec.height)
 
@@ -164,31 +165,35 @@ class Copier:
         """Replay ``ep`` from its seed and draw each copy k (moved by ``deltas[k]``) at every
         frame; the copies as records, in order."""
         cams, spec = self.spec.cameras, self.spec
-        enc = {k: {c: Mp4Encoder(spec.fps, spec.codec) for c in cams} for k in copies}
-        stats = {k: {c: ImageStats() for c in cams} for k in copies}
+        drawn_copies = [k for k in copies if k != 0]
+        enc = {k: {c: Mp4Encoder(spec.fps, spec.codec) for c in cams} for k in drawn_copies}
+        stats = {k: {c: ImageStats() for c in cams} for k in drawn_copies}
         ee = {k: np.empty_like(ep.ee_pose) for k in copies}
         perturb = perturber(self.noise, ep.seed, self.env)
         executed = [executed_action(a, perturb) for a in ep.action.astype(np.float64)]
         frames = replay(self.env, ep.seed, executed, ep.state, ep.environment_state,
                         f"episode {ep.index} (seed {ep.seed})")
         try:
-            for t, obs in enumerate(frames):
-                for k, copy in copies.items():
-                    if k == 0:  # the episode itself: the replay's own frames, as recorded
-                        drawn, ee[k][t] = obs["pixels"], ep.ee_pose[t]
-                    else:
-                        drawn, ee[k][t] = self.scene.render(self.renderer, cams, copy.state[t],
-                                                            deltas[k])
+            for t, _ in enumerate(frames):
+                for k in drawn_copies:
+                    drawn, ee[k][t] = self.scene.render(self.renderer, cams, copies[k].state[t],
+                                                        deltas[k])
                     for c in cams:
                         enc[k][c].add(drawn[c])
                         stats[k][c].add(drawn[c])
         except ReplayMismatch as err:
             raise DatasetError(str(err)) from None
+        videos = {k: {c: enc[k][c].finish() for c in cams} for k in drawn_copies}
+        image_stats = {k: {c: s.result() for c, s in stats[k].items()} for k in drawn_copies}
+        if 0 in copies:  # the episode itself, as recorded: its videos and their statistics
+            ee[0] = ep.ee_pose
+            videos[0] = {c: self.src.video_path(c, ep.index).read_bytes() for c in cams}
+            image_stats[0] = self.src.image_stats(ep.index)
         return [EpisodeRecord(
             ep.task, ep.seed, True, "success", ep.instruction, copy.hidden, copy.state,
             ee[k].astype(np.float32), copy.action, ep.subtask_index, ep.progress,
-            {c: enc[k][c].finish() for c in cams}, {c: s.result() for c, s in stats[k].items()},
-            environment_state=copy.environment_state, subtask_step=ep.subtask_step)
+            videos[k], image_stats[k], environment_state=copy.environment_state,
+            subtask_step=ep.subtask_step)
             for k, copy in copies.items()]
 
 

@@ -242,6 +242,20 @@ class Dataset:
             rows.append({k: v[0] for k, v in table.to_pydict().items()})
         return rows
 
+    def image_stats(self, episode: int) -> dict[str, dict[str, np.ndarray]]:
+        """Each camera's statistics of one episode's frames (min, max, mean, std, count), as
+        its collection computed them (the episode's meta/episodes row)."""
+        table = read_parquet(self.root / L.episodes_file(episode))
+        out = {}
+        for cam in self.cameras:
+            prefix = f"stats/{L.image_key(cam)}/"
+            names = [c for c in table.column_names if c.startswith(prefix)]
+            if not names:
+                raise DatasetError(f"{self.root / L.episodes_file(episode)}: no statistics of "
+                                   f"camera {cam!r}")
+            out[cam] = {c[len(prefix):]: np.asarray(table.column(c)[0].as_py()) for c in names}
+        return out
+
     @cached_property
     def stats(self) -> dict[str, dict[str, np.ndarray]]:
         """meta/stats.json: per feature, its min, max, mean, std and count as arrays."""
