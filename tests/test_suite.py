@@ -171,6 +171,24 @@ def test_jobs_wait_for_what_they_read(tmp_path):
     assert executor_spec("mem0:no_anchor+no_key") == "mem0:no_anchor"
 
 
+def test_a_stage_s_clock_is_kept_while_it_runs(tmp_path):
+    """A stage killed after hours keeps its time: the clock is written as the stage runs."""
+    import time
+
+    from rmbench.suite.stages import TIMING, read_json, timed
+
+    with timed(tmp_path, "copies_wall_s", every=0.01):
+        deadline = time.monotonic() + 5
+        while read_json(tmp_path / TIMING, {}).get("copies_wall_s") is None:
+            assert time.monotonic() < deadline, "nothing written while the stage ran"
+            time.sleep(0.01)
+    first = read_json(tmp_path / TIMING, {})["copies_wall_s"]
+    with timed(tmp_path, "copies_wall_s"):  # a resumption adds on
+        pass
+    timing = read_json(tmp_path / TIMING, {})
+    assert timing["copies_wall_s"] >= first > 0 and len(timing["machines"]) == 1
+
+
 def test_a_task_s_cells_start_before_the_next_task_s_data():
     J = runner.Job
     plan = Plan("pixels", ("put_back_block", "press_button"), ("mem0", "mem0:no_memory"))

@@ -9,8 +9,10 @@ the one its saved state counts (``training.loop.Kept``), every piece up to its l
 from __future__ import annotations
 
 import json
+import threading
 import time
 from collections import Counter
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +47,34 @@ def read_json(path: Path, default):
         return json.loads(Path(path).read_text())
     except (OSError, json.JSONDecodeError):
         return default
+
+
+@contextmanager
+def timed(folder: Path, key: str, every: float = 60.0):
+    """Count the block's wall time into ``folder/timing.json``'s ``key`` (``add_time``) as it
+    runs, every ``every`` seconds and at its end, so that a stage killed after hours (a
+    session's end, Ctrl-C) keeps its time up to the last minute and its resumption adds on."""
+    stop, lock = threading.Event(), threading.Lock()
+    last = [time.perf_counter()]
+
+    def book() -> None:
+        with lock:
+            now = time.perf_counter()
+            add_time(folder, key, now - last[0])
+            last[0] = now
+
+    def beat() -> None:
+        while not stop.wait(every):
+            book()
+
+    clock = threading.Thread(target=beat, daemon=True)
+    clock.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        clock.join()
+        book()
 
 
 def add_time(folder: Path, key: str, seconds: float) -> None:
@@ -217,29 +247,27 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
     cameras, (width, height) = COLLECT_CAMERAS[plan.obs]
     root = plan.data_dir(out, task)
     if not demos_collected(plan, out, task):
-        t0 = time.perf_counter()
-        collect(CollectConfig(task, root, episodes=plan.demos, seed=0, cameras=cameras,
-                              width=width, height=height, workers=workers,
-                              noise=NoiseSpec(plan.noise_kind, plan.noise), progress=progress))
-        add_time(root.parent, "collect_wall_s", time.perf_counter() - t0)
+        with timed(root.parent, "collect_wall_s"):
+            collect(CollectConfig(task, root, episodes=plan.demos, seed=0, cameras=cameras,
+                                  width=width, height=height, workers=workers,
+                                  noise=NoiseSpec(plan.noise_kind, plan.noise),
+                                  progress=progress))
     if plan.rendered_copies and copies_done(plan, out, task) is None:
-        t0 = time.perf_counter()
-        summary = copy_layouts(root, plan.train_data_dir(out, task), plan.rendered_copies,
-                               plan.rendered_reach, seed=0, episodes=plan.demos,
-                               workers=workers, progress=progress)
-        add_time(root.parent, "copies_wall_s", time.perf_counter() - t0)
+        with timed(root.parent, "copies_wall_s"):
+            summary = copy_layouts(root, plan.train_data_dir(out, task), plan.rendered_copies,
+                                   plan.rendered_reach, seed=0, episodes=plan.demos,
+                                   workers=workers, progress=progress)
         write_atomic(copies_record(plan, out, task),
                      (json.dumps(summary.to_dict(), indent=1) + "\n").encode())
     for cache, wanted in feature_caches(plan, out, task):
-        t0 = time.perf_counter()
-        if cache.build(*wanted):
-            add_time(root.parent, "features_wall_s", time.perf_counter() - t0)
+        if cache.missing(*wanted):
+            with timed(root.parent, "features_wall_s"):
+                cache.build(*wanted)
     data = plan.train_data_dir(out, task)
     for n, reach in layout_copy_sets(plan):
         if not layout_copies_cached(data, n, reach, COPIES_SEED):
-            t0 = time.perf_counter()
-            solve_layout_copies(data, n, reach, COPIES_SEED, workers)
-            add_time(root.parent, "layout_copies_wall_s", time.perf_counter() - t0)
+            with timed(root.parent, "layout_copies_wall_s"):
+                solve_layout_copies(data, n, reach, COPIES_SEED, workers)
     ds, timing = Dataset(root), read_json(root.parent / TIMING, {})
     return {"path": str(root), "episodes": ds.num_episodes, "frames": ds.num_frames,
             "cameras": list(ds.cameras), "resolution": f"{width}x{height}",
