@@ -132,6 +132,12 @@ def _without_line(res: dict) -> str:
             "not memory).\n")
 
 
+def _version_mark(task: type, cell: dict) -> str:
+    """'‡' for a record (a cell, an expert run) made on an earlier version of ``task``, the
+    gym id it records (``recorded_gym_id``)."""
+    return "‡" if recorded_gym_id(task.name, cell) != task.gym_id else ""
+
+
 def _older(task: str, spec: str, cell: dict | None) -> str:
     """The marks of a cell measured before the current task or data (CHANGELOG.md): ' †' for
     a Mem-0 cell of an M(n) row trained on datasets older than the current format (its
@@ -144,8 +150,7 @@ def _older(task: str, spec: str, cell: dict | None) -> str:
     marks = ""
     if reads_subtask_cut(task, spec) and cell.get("dataset") != FORMAT:
         marks += "†"
-    if recorded_gym_id(task, cell) != cls.gym_id:
-        marks += "‡"
+    marks += _version_mark(cls, cell)
     return f" {marks}" if marks else ""
 
 
@@ -763,7 +768,7 @@ ROBUSTNESS_COLUMNS = [("white", 0.0), ("smooth", 0.01), ("smooth", 0.02), ("smoo
 
 def _expert_mark(task: type, cell: dict) -> str:
     """' ‡' for an expert cell run on an earlier version of its task."""
-    return " ‡" if recorded_gym_id(task.name, cell) != task.gym_id else ""
+    return f" {_version_mark(task, cell)}".rstrip()
 
 
 def robustness() -> str:

@@ -40,7 +40,7 @@ def failures_by_stage(records: list[dict[str, Any]]) -> dict[str, dict[str, int]
     for r in records:
         if r["success"]:
             continue
-        row = out.setdefault(stage_at_end(r), {})
-        row[ending(r)] = row.get(ending(r), 0) + 1
+        row, how = out.setdefault(stage_at_end(r), {}), ending(r)
+        row[how] = row.get(how, 0) + 1
     return {s: dict(sorted(out[s].items(), key=lambda kv: (-kv[1], kv[0])))
             for s in sorted(out, key=lambda s: order.get(s, len(order)))}

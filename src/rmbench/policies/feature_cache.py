@@ -100,7 +100,10 @@ class FeatureCache:
         """Encode whatever the cache lacks of ``episodes`` x ``cameras`` now (before training
         starts, so that data-loading workers only read); nothing is kept open. How many
         episode videos it encoded."""
-        todo = self.missing(episodes, cameras)
+        return self.encode(self.missing(episodes, cameras))
+
+    def encode(self, todo: list[tuple[int, str]]) -> int:
+        """Encode the (episode, camera) pairs ``todo`` (``missing``'s answer); how many."""
         for n, (e, c) in enumerate(todo):
             if n % 20 == 0:
                 log.info("%s: encoding %d of %d episode videos", self.dir, n + 1, len(todo))

@@ -260,9 +260,10 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
         write_atomic(copies_record(plan, out, task),
                      (json.dumps(summary.to_dict(), indent=1) + "\n").encode())
     for cache, wanted in feature_caches(plan, out, task):
-        if cache.missing(*wanted):
+        todo = cache.missing(*wanted)  # (reads every file's header: once)
+        if todo:
             with timed(root.parent, "features_wall_s"):
-                cache.build(*wanted)
+                cache.encode(todo)
     data = plan.train_data_dir(out, task)
     for n, reach in layout_copy_sets(plan):
         if not layout_copies_cached(data, n, reach, COPIES_SEED):
