@@ -27,6 +27,7 @@ from pathlib import Path
 from rmbench.data.layout import FORMAT
 from rmbench.eval import published as paper
 from rmbench.eval.chance import chance
+from rmbench.eval.endings import failure_kind
 from rmbench.eval.intervals import difference, format_difference, format_rate
 from rmbench.eval.report import PUBLISHED, Rate, published_source
 from rmbench.suite.plan import applies
@@ -811,10 +812,8 @@ def robustness_failures() -> str:
                 continue
             merged: dict[str, int] = {}
             for reason, n in c["failures"].items():
-                for cut in (" to [", " at [", " reach ["):  # coordinates make every reason unique
-                    if cut in reason:
-                        reason = reason.split(cut)[0] + cut.rstrip(" [")
-                merged[reason] = merged.get(reason, 0) + n
+                how = failure_kind(reason)  # coordinates make every reason unique
+                merged[how] = merged.get(how, 0) + n
             ends = "; ".join(f"{r} ({n})" for r, n in sorted(merged.items(), key=lambda x: -x[1])[:4])
             lines.append(f"- {task.name}, {kind} {sigma:g}: {ends}")
     return "\n".join(lines) + "\n"

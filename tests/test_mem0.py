@@ -3,6 +3,7 @@ and the closed loop."""
 
 import json
 import math
+import shutil
 from dataclasses import replace
 
 import numpy as np
@@ -17,7 +18,7 @@ from rmbench.policies.mem0.classifier import Debounce, end_labels, event_labels
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import Planner, planner_examples, runs
-from rmbench.policies.mem0.train import train_mem0
+from rmbench.policies.mem0.train import check_executor_source, executor_digest, train_mem0
 from rmbench.policies.registry import env_options, policy_cameras
 from rmbench.training.loop import TrainConfig, TrainingError
 from tests.conftest import EXPORTED, keep_exports, roll_out
@@ -274,6 +275,8 @@ def test_no_key_beside_mem0s_executor_is_the_checkpoint_a_full_run_writes(mn_dat
         assert torch.equal(full[k], beside[k]), k
     config = read_config(tmp_path / "beside")
     assert config.pop("executor_from") == result["executor_from"]
+    source = load_file(tmp_path / "mem0" / "model.safetensors")
+    assert config.pop("executor_sha256") == executor_digest(source) == executor_digest(beside)
     assert config == read_config(tmp_path / "full")
     planner = [json.loads((tmp_path / r / "training" / "planner.json").read_text())
                for r in ("full", "beside")]
@@ -295,6 +298,14 @@ def test_no_key_beside_mem0s_executor_is_the_checkpoint_a_full_run_writes(mn_dat
     with pytest.raises(ValueError, match="trains its own"):
         train_mem0(mn_dataset, tmp_path / "z", replace(mem0, ablations=("no_anchor",)), run,
                    progress=False, executor_from=tmp_path / "mem0")
+    # the derived checkpoint stays tied to its source: a source trained again is caught
+    check_executor_source(tmp_path / "beside")
+    check_executor_source(tmp_path / "full")  # a run of its own: nothing to check
+    train_mem0(mn_dataset, tmp_path / "mem0b", mem0, replace(run, seed=2), progress=False)
+    for f in ("model.safetensors", "config.json"):
+        shutil.copyfile(tmp_path / "mem0b" / f, tmp_path / "mem0" / f)
+    with pytest.raises(CheckpointError, match="trained again since"):
+        check_executor_source(tmp_path / "beside")
 
 
 def test_resume_gives_the_weights_of_an_uninterrupted_run(mn_dataset, tmp_path,

@@ -304,6 +304,10 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
         timing = {k: result[k] for k in ("train_wall_s", "train_wall_from_step", "machines",
                                          "executor_from") if k in result}
         write_atomic(folder / TIMING, (json.dumps(timing, indent=1) + "\n").encode())
+    elif executor_spec(trained_spec(spec)) is not None:
+        from rmbench.policies.mem0.train import check_executor_source
+
+        check_executor_source(folder)
     return folder
 
 

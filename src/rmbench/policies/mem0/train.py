@@ -5,6 +5,7 @@ their cached features by a frozen ``backbone``) or on its state observation
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import time
@@ -22,7 +23,13 @@ from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
 from rmbench.machine import describe as describe_machine
 from rmbench.policies.action_space import EE_DIM, EEActions
-from rmbench.policies.checkpoint import read_weights, save_checkpoint, saved_step
+from rmbench.policies.checkpoint import (
+    CheckpointError,
+    read_config,
+    read_weights,
+    save_checkpoint,
+    saved_step,
+)
 from rmbench.policies.feature_cache import FeatureCache, features_record, with_features
 from rmbench.policies.mem0.classifier import end_labels, event_labels
 from rmbench.policies.mem0.config import PLANNER_ABLATIONS, Mem0Config
@@ -218,10 +225,40 @@ def _beside_executor(source: Path, step: int, model: Mem0Model, out: Path,
     # the planner's report first: the checkpoint's config is what says the run is done
     write_atomic(out / "training" / "planner.json",
                  (json.dumps(planner_report, indent=2) + "\n").encode())
-    save_checkpoint(out, model, {**describe, "executor_from": str(source.resolve())}, step)
+    save_checkpoint(out, model, {**describe, "executor_from": str(source.resolve()),
+                                 "executor_sha256": executor_digest(weights)}, step)
     return {"steps": step, "resumed_from": 0, "wall_s": round(wall_s, 1),
             "train_wall_s": round(wall_s, 1), "train_wall_from_step": 0,
             "machines": [describe_machine()], "executor_from": str(source.resolve())}
+
+
+def executor_digest(weights: dict[str, torch.Tensor]) -> str:
+    """sha256 over a checkpoint's executor tensors (name, dtype, bytes; by name): what ties a
+    checkpoint made beside another run's executor to that run's weights."""
+    h = hashlib.sha256()
+    for name in sorted(k for k in weights if k.startswith("executor.")):
+        t = weights[name].contiguous()
+        h.update(f"{name}:{t.dtype}:{tuple(t.shape)};".encode())
+        h.update(t.view(torch.uint8).numpy().tobytes() if t.numel() else b"")
+    return h.hexdigest()
+
+
+def check_executor_source(folder: Path) -> None:
+    """A checkpoint made beside another run's executor (its config's ``executor_from``) still
+    holds that run's executor: a CheckpointError where the source was trained again since, so
+    that a planner-only ablation is never set beside an executor it was not made with."""
+    config = read_config(folder)
+    source = config.get("executor_from")
+    if source is None:
+        return
+    step = saved_step(source)
+    if step is None:
+        raise CheckpointError(f"{folder} took its executor from {source}, which holds no "
+                              f"complete checkpoint now")
+    mine = executor_digest(read_weights(folder, config["step"]))
+    if executor_digest(read_weights(source, step)) != mine:
+        raise CheckpointError(f"{folder} took its executor from {source}, trained again "
+                              f"since; move {folder} aside to make it again beside the new one")
 
 
 def to_pose_actions(frames: Mem0Frames, stats, horizon: int) -> Normalizer:
