@@ -135,6 +135,13 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                 replaced.setdefault(task, {})[spec] = old
             doc["cells"][task][spec] = new
         doc["chance"][task] = run["chance"][task] if "chance" in run else asdict(chance(task))
+        walls = (run.get("wall_s") or {}).get("data", {}).get(task)
+        if walls:  # the task's data stages, shared by its cells (a note written on them kept)
+            kept = doc.setdefault("data_walls", {}).get(task, {})
+            doc["data_walls"][task] = {**walls, **{k: v for k, v in kept.items() if k == "note"}}
+    if replaced and not why:
+        raise SystemExit("--why: say why the cells this replaces no longer stand (" + ", ".join(
+            f"{task} {spec}" for task, cells in replaced.items() for spec in cells) + ")")
     if replaced:
         groups = [g for g in doc.get("superseded", []) if g["why"] != why]
         same = next((g for g in doc.get("superseded", []) if g["why"] == why), None)
@@ -163,8 +170,6 @@ def main(argv: list[str] | None = None) -> int:
                                             "benchmarks/results/table_<obs>.json)")
     args = p.parse_args(argv)
     args.out = args.out or RESULTS / f"table_{args.obs}.json"
-    if args.seed is None and not args.why:
-        raise SystemExit("--why: say why the cells this replaces no longer stand")
     if args.seed is not None and args.seed < 0:
         raise SystemExit(f"--seed {args.seed}: a training seed is 0 or more")
     if args.evaluation and "," in args.specs:

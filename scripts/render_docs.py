@@ -293,6 +293,33 @@ def pixels_policies() -> str:
             "cells are.\n" + _without_line(res) + _footnote(table))
 
 
+def pixels_cost() -> str:
+    """Each measured row's cost: its data stages (shared by its cells) and each cell's
+    training and evaluation, in core-hours as measured (one thread or worker each)."""
+    res = pixel_table()
+    walls = res.get("data_walls", {})
+    specs = ["mem0", "mem0:no_memory", "mem0:no_key", "mem0:gt_classifier", "dp", "act"]
+    rows, notes = [], []
+    for task in ordered():
+        cells = {s: c for s, c in res["cells"][task.name].items() if s in specs and c}
+        if not cells:
+            continue
+        w = walls.get(task.name, {})
+        data = [w.get(k) for k in ("collect_wall_s", "copies_wall_s", "features_wall_s")]
+        fits = "; ".join(f"{COLUMN[s]} {minutes(c.get('train_wall_s'))}" for s, c in cells.items()
+                         if c.get("train_wall_s") is not None)
+        evals = "; ".join(f"{COLUMN[s]} {minutes(c.get('eval_wall_s'))}" for s, c in cells.items())
+        spent = [x for x in data if x is not None] + [
+            c.get(k) or 0 for c in cells.values() for k in ("train_wall_s", "eval_wall_s")]
+        rows.append([task.name, *(minutes(x) for x in data), fits, evals,
+                     f"{sum(spent) / 3600:.1f}"])
+        if w.get("note"):
+            notes.append(f"{task.name}: {w['note']}")
+    table = markdown(["task", "demonstrations", "rendered copies", "cached features", "training",
+                      "evaluation", "core-hours so far"], rows) if rows else "No row measured yet.\n"
+    return table + "".join(f"\n{n}\n" for n in notes)
+
+
 def pixels_ablations() -> str:
     res = pixel_table()
     specs = ["mem0", "mem0:no_key", "mem0:gt_classifier"]
@@ -958,6 +985,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "tasks": tasks,
     "readme-results": readme_results, "state-policies": state_policies,
     "pixels-policies": pixels_policies, "pixels-ablations": pixels_ablations,
+    "pixels-cost": pixels_cost,
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds, "state-failures": state_failures,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,

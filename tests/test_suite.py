@@ -6,6 +6,7 @@ import argparse
 import importlib.util
 import io
 import json
+import shlex
 from pathlib import Path
 
 import pytest
@@ -274,6 +275,11 @@ def test_report_only_writes_the_whole_table_from_cells_run_apart(toy_table, tmp_
     assert cli([*wide, "--report-only"]) == 0
     assert "jobs to run" not in capsys.readouterr().err
     res = json.loads((copy / "table.json").read_text())
+    # the command recorded is the one that makes the cells, which the report only reads
+    assert res["command"] == "rmbench " + " ".join(shlex.quote(a) for a in wide)
+    # each task's data stages timed once, beside its cells (a task not run has none)
+    assert res["wall_s"]["data"]["observe_and_pickup"]["collect_wall_s"] > 0
+    assert res["wall_s"]["data"]["swap_T"] == {}
     cells = res["cells"]["observe_and_pickup"]
     assert cells["mem0"]["episodes"] == 1 and cells["dp"]["episodes"] == 1
     assert cells["mem0:no_memory"] is None and res["cells"]["swap_T"]["mem0"] is None

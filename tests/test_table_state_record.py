@@ -175,9 +175,12 @@ def test_the_command_line_refuses_a_negative_seed_and_a_missing_why(table_state)
     with pytest.raises(SystemExit, match="a training seed is 0 or more"):
         table_state.main(["--table", "t", "--tasks", "press_button", "--specs", "mem0",
                           "--dataset", "rmbench/2", "--seed", "-1"])
-    with pytest.raises(SystemExit, match="--why: say why"):
-        table_state.main(["--table", "t", "--tasks", "press_button", "--specs", "mem0",
-                          "--dataset", "rmbench/2"])
+    # --why is asked for only where a cell moves to superseded, and names the cells
+    with pytest.raises(SystemExit, match=r"--why: say why .* \(press_button mem0\)"):
+        table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", None, "t")
+    doc = table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", "f1", "t")
+    doc = table_state.record(doc, _run(40), ["press_button"], ["mem0"], "rmbench/2", None, "t")
+    assert doc["cells"]["press_button"]["mem0"]["successes"] == 40
 
 
 def test_the_camera_table_starts_from_its_first_record(table_state, tmp_path):
@@ -189,7 +192,7 @@ def test_the_camera_table_starts_from_its_first_record(table_state, tmp_path):
     (tmp_path / "table.json").write_text(json.dumps(run))
     out = tmp_path / "table_pixels.json"
     args = ["--table", str(tmp_path), "--tasks", "press_button", "--specs", "mem0",
-            "--dataset", "rmbench/2", "--why", "first", "--obs", "pixels", "--out", str(out)]
+            "--dataset", "rmbench/2", "--obs", "pixels", "--out", str(out)]  # nothing replaced
     assert table_state.main(args) == 0
     doc = json.loads(out.read_text())
     assert doc["command"] == table_state.PIXELS_COMMAND and doc["plan"]["obs"] == "pixels"
@@ -197,6 +200,14 @@ def test_the_camera_table_starts_from_its_first_record(table_state, tmp_path):
     assert doc["chance"]["press_button"] == {"rate": 0.011} and doc["superseded"] == []
     with pytest.raises(SystemExit, match="not state"):
         table_state.main([*args[:-4], "--out", str(out)])  # --obs state by default
+    # a task's data walls come with its cells; a note written on them stays on re-recording
+    doc["data_walls"] = {"press_button": {"collect_wall_s": 1.0, "note": "in pieces"}}
+    out.write_text(json.dumps(doc))
+    (tmp_path / "table.json").write_text(json.dumps(
+        {**run, "wall_s": {"data": {"press_button": {"collect_wall_s": 2.0, "copies_wall_s": 3.0}}}}))
+    assert table_state.main(args) == 0
+    assert json.loads(out.read_text())["data_walls"] == {
+        "press_button": {"collect_wall_s": 2.0, "copies_wall_s": 3.0, "note": "in pieces"}}
 
 
 def test_an_m1_seed_pools_across_dataset_formats_an_mn_seed_does_not(table_state):

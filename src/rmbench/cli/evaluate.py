@@ -116,7 +116,9 @@ def cmd_table(args) -> int:
         failed = {}
     else:
         failed = runner.run(plan, out, jobs=args.jobs, backend=args.backend)
-    command = "rmbench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    # the command that makes these cells (a report reads what that command writes), which
+    # the results record beside each cell
+    command = "rmbench " + " ".join(shlex.quote(a) for a in args.argv if a != "--report-only")
     tables.write(plan, out, command, {job.name: err for job, err in failed.items()})
     print((out / "table.md").read_text())
     print(f"wrote {out / 'table.md'} and {out / 'table.json'}")

@@ -31,6 +31,9 @@ ABLATION_TABLE = ("mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory",
                   "mem0:gt_classifier")
 
 
+DATA_WALLS = ("collect_wall_s", "copies_wall_s", "features_wall_s", "layout_copies_wall_s")
+
+
 def results(plan: Plan, out: Path, command: str = "",
             failed: dict[str, str] | None = None) -> dict[str, Any]:
     """Every cell's row (None where not evaluated) with the plan, the failures of the last
@@ -42,12 +45,17 @@ def results(plan: Plan, out: Path, command: str = "",
         seeds.setdefault(task, {}).setdefault(base, {})[seed] = cell_row(plan, out, task, spec)
     cells = {task: {base: pooled_row(rows) for base, rows in columns.items()}
              for task, columns in seeds.items()}
-    collect = {t: read_json(Path(out) / t / TIMING, {}).get("collect_wall_s") for t in cells}
+    timing = {t: read_json(Path(out) / t / TIMING, {}) for t in cells}
+    collect = {t: timing[t].get("collect_wall_s") for t in cells}
+    # each task's data stages, shared by its cells (the pixel track's rendered copies and
+    # cached features; the state track's solved layout copies)
+    data = {t: {k: timing[t][k] for k in DATA_WALLS if timing[t].get(k) is not None}
+            for t in cells}
     levels = {t: asdict(chance(t)) for t in cells}
     return {"command": command, "plan": plan.to_dict(), "cells": cells, "chance": levels,
             "differences": differences(cells), "failed": failed or {},
             "wall_s": {"table": read_json(Path(out) / TIMING, {}).get("table_wall_s"),
-                       "collect": collect},
+                       "collect": collect, "data": data},
             "machine": describe()}
 
 
