@@ -126,7 +126,8 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                     doc["cells"].get(task, {}).get(spec), new, seed, task, spec)
                 continue
             old = doc["cells"].setdefault(task, {}).get(spec)
-            if old is not None and "seeds" in old and "seeds" not in new:
+            if old is not None and "seeds" in old and "seeds" not in new and \
+                    _version(task, old, spec) == _version(task, new, spec):
                 raise SystemExit(f"{task} {spec}: the recorded cell pools seeds "
                                  f"{sorted(old['seeds'])}; give --seed to replace one")
             # a cell of the same data and task version is the same recipe measured before

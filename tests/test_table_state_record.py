@@ -64,6 +64,13 @@ def test_a_cell_of_another_task_version_moves_to_superseded(table_state):
     doc = table_state.record(doc, run, ["battery_try"], ["mem0"], "rmbench/2", "v1", "t")
     assert doc["cells"]["battery_try"]["mem0"]["successes"] == 80
     assert doc["superseded"][0]["cells"]["battery_try"]["mem0"]["successes"] == 94
+    # a cell pooling seeds moves whole: a first seed on the new version stands alone
+    doc["cells"]["battery_try"]["mem0"] = {"successes": 180, "dataset": "rmbench/2",
+                                           "gym_id": "rmbench/BatteryTry-v2", "seeds": {}}
+    run["cells"]["battery_try"]["mem0"] = {"successes": 40, "gym_id": "rmbench/BatteryTry-v3"}
+    doc = table_state.record(doc, run, ["battery_try"], ["mem0"], "rmbench/2", "v2", "t")
+    assert doc["cells"]["battery_try"]["mem0"]["successes"] == 40
+    assert doc["superseded"][-1]["cells"]["battery_try"]["mem0"]["successes"] == 180
 
 
 def test_an_evaluation_folder_gives_one_column_with_its_checkpoints_history(tmp_path):
