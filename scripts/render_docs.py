@@ -293,6 +293,17 @@ def pixels_policies() -> str:
             "cells are.\n" + _without_line(res) + _footnote(table))
 
 
+def validation_probes() -> str:
+    """Recipe probes on the validation episodes (benchmarks/validation_probes.py)."""
+    path = RESULTS / "validation_probes.json"
+    probes = json.loads(path.read_text())["probes"] if path.exists() else []
+    rows = [[p["task"], f"`{Path(p['policy'].split('?')[0]).name.split('-s')[0]}`", p["change"],
+             rate(p), ", ".join(f"{k} {v}" for k, v in p["endings"].items() if v)]
+            for p in probes]
+    return markdown(["task", "checkpoint (training seed)", "probe", "success (validation)",
+                     "endings"], rows)
+
+
 def pixels_cost() -> str:
     """Each measured row's cost: its data stages (shared by its cells) and each cell's
     training and evaluation, in core-hours as measured (one thread or worker each)."""
@@ -985,7 +996,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "tasks": tasks,
     "readme-results": readme_results, "state-policies": state_policies,
     "pixels-policies": pixels_policies, "pixels-ablations": pixels_ablations,
-    "pixels-cost": pixels_cost,
+    "pixels-cost": pixels_cost, "validation-probes": validation_probes,
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds, "state-failures": state_failures,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,

@@ -1,0 +1,66 @@
+"""Recipe probes on the validation episodes: each ``rmbench eval --split validation`` folder
+given becomes one row of benchmarks/results/validation_probes.json (the task, the checkpoint
+and what the probe changes, success with its Wilson 95% interval, how the episodes ended),
+so a recipe choice reads episodes that no table reports.
+
+    python benchmarks/validation_probes.py --probe "CHANGE=FOLDER" [--probe ...]
+        [--out benchmarks/results/validation_probes.json]
+
+CHANGE says in words what the probe changes against the table's recipe ("the recipe" for
+the checkpoint as trained). A probe of the same task, policy and change replaces its row.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from rmbench.video import write_atomic
+
+OUT = Path(__file__).resolve().parent / "results" / "validation_probes.json"
+
+
+def probe_row(change: str, folder: Path) -> dict:
+    """One validation evaluation's row; a folder of test episodes, or not finished, is a
+    SystemExit saying so."""
+    try:
+        run = json.loads((folder / "run.json").read_text())
+        summary = json.loads((folder / "summary.json").read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise SystemExit(f"{folder}: not a finished evaluation ({err})") from None
+    if run.get("split") != "validation":
+        raise SystemExit(f"{folder}: evaluated on the {run.get('split', 'test')} episodes, not "
+                         f"the validation ones")
+    ((task, res),) = summary["tasks"].items()
+    if res["episodes"] < run["episodes"]:
+        raise SystemExit(f"{folder}: {res['episodes']} of {run['episodes']} episodes so far")
+    return {"task": task, "change": change, "policy": run["policy"], "seed": run["seed"],
+            "episodes": res["episodes"], "successes": res["successes"],
+            "success_rate": res["success_rate"], "success_ci95": res["success_ci95"],
+            "endings": res["endings"], "gym_id": res.get("gym_id"),
+            "command": f"rmbench eval --task {task} --policy '{run['policy']}' --episodes "
+                       f"{run['episodes']} --split validation --seed {run['seed']}"}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--probe", action="append", required=True, metavar="CHANGE=FOLDER")
+    p.add_argument("--out", type=Path, default=OUT)
+    args = p.parse_args(argv)
+    doc = json.loads(args.out.read_text()) if args.out.exists() else {"probes": []}
+    for item in args.probe:
+        change, sep, folder = item.partition("=")
+        if not sep or not change.strip():
+            raise SystemExit(f"--probe {item!r}: give CHANGE=FOLDER")
+        row = probe_row(change.strip(), Path(folder))
+        key = (row["task"], row["policy"], row["change"])
+        doc["probes"] = [r for r in doc["probes"]
+                         if (r["task"], r["policy"], r["change"]) != key] + [row]
+    write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

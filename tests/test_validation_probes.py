@@ -1,0 +1,48 @@
+"""benchmarks/validation_probes.py: a validation evaluation becomes one row of the probes'
+results; test episodes and unfinished runs are refused in one line."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def probes():
+    spec = importlib.util.spec_from_file_location("probes", ROOT / "benchmarks" / "validation_probes.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _eval(folder: Path, split="validation", done=100, successes=79) -> Path:
+    folder.mkdir(parents=True)
+    (folder / "run.json").write_text(json.dumps(
+        {"policy": "mem0:ckpt?sample_noise=1", "seed": 0, "episodes": 100, "split": split}))
+    (folder / "summary.json").write_text(json.dumps({"tasks": {"put_back_block": {
+        "episodes": done, "successes": successes, "success_rate": successes / 100,
+        "success_ci95": [0.7, 0.86], "endings": {"success": successes}}}}))
+    return folder
+
+
+def test_a_probe_is_recorded_once_per_task_policy_and_change(probes, tmp_path):
+    out = tmp_path / "probes.json"
+    a = _eval(tmp_path / "a")
+    b = _eval(tmp_path / "b", successes=66)
+    assert probes.main(["--probe", f"noise 1={a}", "--out", str(out)]) == 0
+    assert probes.main(["--probe", f"noise 1={b}", "--out", str(out)]) == 0  # replaces it
+    (row,) = json.loads(out.read_text())["probes"]
+    assert (row["task"], row["change"], row["successes"]) == ("put_back_block", "noise 1", 66)
+    assert "--split validation" in row["command"]
+
+
+def test_test_episodes_and_unfinished_runs_are_refused(probes, tmp_path):
+    with pytest.raises(SystemExit, match="test episodes, not the validation ones"):
+        probes.probe_row("x", _eval(tmp_path / "t", split="test"))
+    with pytest.raises(SystemExit, match="60 of 100 episodes so far"):
+        probes.probe_row("x", _eval(tmp_path / "u", done=60))
+    with pytest.raises(SystemExit, match="give CHANGE=FOLDER"):
+        probes.main(["--probe", str(tmp_path / "t"), "--out", str(tmp_path / "o.json")])
