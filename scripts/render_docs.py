@@ -478,11 +478,20 @@ def state_seeds() -> str:
 def state_failures() -> str:
     """The rows where Mem-0 stays below the published Mem-0: where its failed episodes end,
     by the plan's stage and how (``eval/endings.py``), per training seed whose records keep it."""
-    res = load("table_state.json")
+    return _failures(load("table_state.json"), below_published=True)
+
+
+def pixels_failures() -> str:
+    """Every measured camera row: where Mem-0's failed episodes end."""
+    return _failures(pixel_table(), below_published=False)
+
+
+def _failures(res: dict, below_published: bool) -> str:
     rows, unkept = [], []
     for task in ordered():
         cell = res["cells"].get(task.name, {}).get("mem0")
-        if cell is None or 100 * cell["successes"] / cell["episodes"] >= PUBLISHED["Mem-0"][task.name]:
+        if cell is None or below_published and (
+                100 * cell["successes"] / cell["episodes"] >= PUBLISHED["Mem-0"][task.name]):
             continue
         label = task.name + _older(task.name, "mem0", cell)
         kept = {k: r for k, r in seed_records(cell).items() if r.get("failed_at")}
@@ -996,7 +1005,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "tasks": tasks,
     "readme-results": readme_results, "state-policies": state_policies,
     "pixels-policies": pixels_policies, "pixels-ablations": pixels_ablations,
-    "pixels-cost": pixels_cost, "validation-probes": validation_probes,
+    "pixels-cost": pixels_cost, "pixels-failures": pixels_failures,
+    "validation-probes": validation_probes,
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds, "state-failures": state_failures,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,
