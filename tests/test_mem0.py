@@ -846,3 +846,13 @@ def test_layout_copies_train_on_demonstrations_moved_across_the_table(dataset, t
         Mem0Config(observation="pixels", layout_copies=1, layout_shift=0.01)
     with pytest.raises(ValueError, match="layout_copies"):
         replace(TINY_STATE, layout_copies=-1)
+
+
+def test_the_executor_digest_reads_the_executor_alone_scalars_included():
+    weights = {"executor.scale": torch.tensor(1.5), "executor.w": torch.zeros(2, 3),
+               "executor.empty": torch.zeros(0), "planner.w": torch.ones(2)}
+    digest = executor_digest(weights)
+    weights["planner.w"] += 1  # the planner is the ablation's own
+    assert executor_digest(weights) == digest
+    weights["executor.scale"] += 1
+    assert executor_digest(weights) != digest

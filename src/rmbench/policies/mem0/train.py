@@ -239,7 +239,7 @@ def executor_digest(weights: dict[str, torch.Tensor]) -> str:
     for name in sorted(k for k in weights if k.startswith("executor.")):
         t = weights[name].contiguous()
         h.update(f"{name}:{t.dtype}:{tuple(t.shape)};".encode())
-        h.update(t.view(torch.uint8).numpy().tobytes() if t.numel() else b"")
+        h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes() if t.numel() else b"")
     return h.hexdigest()
 
 
