@@ -126,13 +126,13 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                     doc["cells"].get(task, {}).get(spec), new, seed, task, spec)
                 continue
             old = doc["cells"].setdefault(task, {}).get(spec)
-            if old is not None and "seeds" in old and "seeds" not in new and \
-                    _version(task, old, spec) == _version(task, new, spec):
+            same = old is not None and _version(task, old, spec) == _version(task, new, spec)
+            if same and "seeds" in old and "seeds" not in new:
                 raise SystemExit(f"{task} {spec}: the recorded cell pools seeds "
                                  f"{sorted(old['seeds'])}; give --seed to replace one")
             # a cell of the same data and task version is the same recipe measured before
             # (or one of the seeds the new cell pools): the new one stands for it
-            if old is not None and _version(task, old, spec) != _version(task, new, spec):
+            if old is not None and not same:
                 replaced.setdefault(task, {})[spec] = old
             doc["cells"][task][spec] = new
         doc["chance"][task] = run["chance"][task] if "chance" in run else asdict(chance(task))

@@ -14,7 +14,7 @@ import pytest
 from rmbench.cli.main import main as cli
 from rmbench.eval.chance import chance
 from rmbench.machine import describe, short
-from rmbench.suite import runner, stages, tables
+from rmbench.suite import clock, runner, stages, tables
 from rmbench.suite.plan import (
     GENERIC,
     RECIPES,
@@ -176,7 +176,7 @@ def test_a_stage_s_clock_is_kept_while_it_runs(tmp_path):
     """A stage killed after hours keeps its time: the clock is written as the stage runs."""
     import time
 
-    from rmbench.suite.stages import TIMING, read_json, timed
+    from rmbench.suite.clock import TIMING, read_json, timed
 
     with timed(tmp_path, "copies_wall_s", every=0.01):
         deadline = time.monotonic() + 5
@@ -479,13 +479,13 @@ def test_a_terminated_table_stops_its_jobs(toy_table, tmp_path):
 
 
 def test_a_stage_resumed_on_another_machine_lists_both(tmp_path, monkeypatch):
-    stages.add_time(tmp_path, "eval_wall_s", 60.0)
-    stages.add_time(tmp_path, "eval_wall_s", 30.0)  # resumed on the same machine: listed once
+    clock.add_time(tmp_path, "eval_wall_s", 60.0)
+    clock.add_time(tmp_path, "eval_wall_s", 30.0)  # resumed on the same machine: listed once
     here = describe()
     other = {**here, "cores": here["cores"] + 14}  # unlike this one, whatever this one is
-    monkeypatch.setattr(stages, "describe", lambda: other)
-    stages.add_time(tmp_path, "eval_wall_s", 10.0)
-    timing = stages.read_json(tmp_path / stages.TIMING, {})
+    monkeypatch.setattr(clock, "describe", lambda: other)
+    clock.add_time(tmp_path, "eval_wall_s", 10.0)
+    timing = clock.read_json(tmp_path / clock.TIMING, {})
     assert timing == {"eval_wall_s": 100.0, "machines": [here, other]}
 
 

@@ -5,7 +5,7 @@ steps/s on the first machines and at 4.5 steps/s on a later one of the same size
 and name ("AMD EPYC", 2 cores, 24 GB), whose CPU has AVX2 and no AVX-512 (the earlier ones'
 flags were not recorded). A table may be built over several runs, each on another
 machine, so each stage records the machine it ran on beside its time
-(``suite.stages.add_time``). Read from ``/proc/cpuinfo`` where there is one; nothing here
+(``suite.clock.add_time``). Read from ``/proc/cpuinfo`` where there is one; nothing here
 imports torch.
 """
 

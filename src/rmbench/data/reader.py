@@ -15,7 +15,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from rmbench.data import layout as L
-from rmbench.data.stats import from_json
+from rmbench.data.stats import from_json, pop_stats
 from rmbench.data.writer import DatasetError
 from rmbench.tasks.registry import UnknownTaskError, get_task
 from rmbench.video import decode_video
@@ -245,16 +245,12 @@ class Dataset:
     def image_stats(self, episode: int) -> dict[str, dict[str, np.ndarray]]:
         """Each camera's statistics of one episode's frames (min, max, mean, std, count), as
         its collection computed them (the episode's meta/episodes row)."""
-        table = read_parquet(self.root / L.episodes_file(episode))
-        out = {}
-        for cam in self.cameras:
-            prefix = f"stats/{L.image_key(cam)}/"
-            names = [c for c in table.column_names if c.startswith(prefix)]
-            if not names:
-                raise DatasetError(f"{self.root / L.episodes_file(episode)}: no statistics of "
-                                   f"camera {cam!r}")
-            out[cam] = {c[len(prefix):]: np.asarray(table.column(c)[0].as_py()) for c in names}
-        return out
+        path = self.root / L.episodes_file(episode)
+        stats = pop_stats({k: v[0] for k, v in read_parquet(path).to_pydict().items()})
+        missing = [c for c in self.cameras if L.image_key(c) not in stats]
+        if missing:
+            raise DatasetError(f"{path}: no statistics of camera {missing[0]!r}")
+        return {c: stats[L.image_key(c)] for c in self.cameras}
 
     @cached_property
     def stats(self) -> dict[str, dict[str, np.ndarray]]:

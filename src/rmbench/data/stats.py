@@ -21,6 +21,16 @@ def array_stats(x: np.ndarray) -> dict[str, np.ndarray]:
             "count": np.array([len(x)])}
 
 
+def pop_stats(row: dict) -> dict[str, dict[str, np.ndarray]]:
+    """Take an episode's statistics out of its meta/episodes ``row`` (its ``stats/<feature>/
+    <stat>`` columns): {feature: {stat: array}}."""
+    stats: dict[str, dict[str, np.ndarray]] = {}
+    for col in [c for c in row if c.startswith("stats/")]:
+        _, key, stat = col.split("/")  # feature names hold no "/"
+        stats.setdefault(key, {})[stat] = np.asarray(row.pop(col))
+    return stats
+
+
 def aggregate(per_episode: list[dict[str, dict[str, np.ndarray]]]) -> dict[str, dict[str, np.ndarray]]:
     """Combine per-episode statistics of the same features into dataset statistics."""
     if not per_episode:

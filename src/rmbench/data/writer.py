@@ -24,7 +24,7 @@ import pyarrow.parquet as pq
 
 from rmbench.data import layout as L
 from rmbench.data.record import EpisodeRecord
-from rmbench.data.stats import aggregate, array_stats, to_json
+from rmbench.data.stats import aggregate, array_stats, pop_stats, to_json
 from rmbench.identity import differences
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
@@ -245,10 +245,7 @@ class DatasetWriter:
         for path in _committed_episode_files(self.root):
             table = pq.read_table(path)
             row = {k: v[0] for k, v in table.to_pydict().items()}
-            stats: dict[str, dict] = {}
-            for col in [c for c in row if c.startswith("stats/")]:
-                _, key, stat = col.split("/")  # feature names hold no "/"
-                stats.setdefault(key, {})[stat] = np.asarray(row.pop(col))
+            stats = pop_stats(row)
             self.episodes.append(row)
             self._stats.append(stats)
         if self.episodes:

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import TextIO
 
 from rmbench.machine import usable_cores
-from rmbench.suite import stages
+from rmbench.suite import clock, stages
 from rmbench.suite.job import run_job, source_digest
 from rmbench.suite.plan import Plan, executor_spec, trained_spec
 
@@ -293,7 +293,7 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
         pool.stop()
         if main:
             signal.signal(signal.SIGTERM, on_term)
-        stages.add_time(out, "table_wall_s", time.perf_counter() - t0)
+        clock.add_time(out, "table_wall_s", time.perf_counter() - t0)
     return failed
 
 

@@ -1,18 +1,17 @@
 """A table cell's three stages, each resumable and each a no-op once done: collect the task's
 training data (its demonstrations; with ``rendered_copies`` their rendered layout copies; the
 frozen backbones' features, so that the training jobs beside each other only read them), train
-the cell's checkpoint, evaluate it. Wall times accumulate in each
-folder's ``timing.json`` over the calls that completed a stage's piece (a call killed midway
-loses its own time, not what it saved), with the machines those calls ran on; a training's is
-the one its saved state counts (``training.loop.Kept``), every piece up to its last save."""
+the cell's checkpoint, evaluate it. Wall times accumulate in each folder's ``timing.json``
+(``suite.clock``) with the machines they ran on: a data stage's minute by minute as it runs,
+an evaluation's when a call completes it (a call killed midway loses its own time, not the
+episodes it saved); a training's is the one its saved state counts (``training.loop.Kept``),
+every piece up to its last save."""
 
 from __future__ import annotations
 
 import json
-import threading
 import time
 from collections import Counter
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +22,7 @@ from rmbench.envs.noise import NoiseSpec
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
-from rmbench.machine import describe
+from rmbench.suite.clock import DATA_WALLS, TIMING, add_time, read_json, timed
 from rmbench.suite.plan import (
     COLLECT_CAMERAS,
     Plan,
@@ -38,57 +37,6 @@ from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.training.loop import CURVE_CSV, STATE, TrainConfig
 from rmbench.video import write_atomic
-
-TIMING = "timing.json"
-
-
-def read_json(path: Path, default):
-    try:
-        return json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError):
-        return default
-
-
-@contextmanager
-def timed(folder: Path, key: str, every: float = 60.0):
-    """Count the block's wall time into ``folder/timing.json``'s ``key`` (``add_time``) as it
-    runs, every ``every`` seconds and at its end, so that a stage killed after hours (a
-    session's end, Ctrl-C) keeps its time up to the last minute and its resumption adds on."""
-    stop, lock = threading.Event(), threading.Lock()
-    last = [time.perf_counter()]
-
-    def book() -> None:
-        with lock:
-            now = time.perf_counter()
-            add_time(folder, key, now - last[0])
-            last[0] = now
-
-    def beat() -> None:
-        while not stop.wait(every):
-            book()
-
-    clock = threading.Thread(target=beat, daemon=True)
-    clock.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        clock.join()
-        book()
-
-
-def add_time(folder: Path, key: str, seconds: float) -> None:
-    """Accumulate a stage's wall time in ``folder/timing.json``, and the machine it ran on in
-    ``machines`` (each machine that added time once)."""
-    path = Path(folder) / TIMING
-    timing = read_json(path, {})
-    timing[key] = timing.get(key, 0.0) + seconds  # unrounded: short stages add up
-    machines = timing.setdefault("machines", [])
-    here = describe()
-    if here not in machines:
-        machines.append(here)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(path, (json.dumps(timing, indent=1) + "\n").encode())
 
 
 # ------------------------------------------------------------------------------ done yet?
@@ -274,11 +222,8 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
             "cameras": list(ds.cameras), "resolution": f"{width}x{height}",
             "environment_state": ds.state_names is not None,
             "noise": NoiseSpec(plan.noise_kind, plan.noise).to_dict() if plan.noise else None,
-            "collect_wall_s": timing.get("collect_wall_s"),
             "rendered_copies": copies_done(plan, out, task),
-            "copies_wall_s": timing.get("copies_wall_s"),
-            "features_wall_s": timing.get("features_wall_s"),
-            "layout_copies_wall_s": timing.get("layout_copies_wall_s")}
+            **{k: timing.get(k) for k in DATA_WALLS}}
 
 
 def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = False) -> Path:

@@ -20,18 +20,16 @@ from rmbench.eval.intervals import difference, format_difference, outside_noise,
 from rmbench.eval.published import ablation_names
 from rmbench.eval.report import PUBLISHED, Rate, format_cell, published_source, table
 from rmbench.machine import describe, short
+from rmbench.suite.clock import DATA_WALLS, TIMING, read_json
 from rmbench.suite.plan import Plan, applies, split_seed
 from rmbench.suite.runner import column
-from rmbench.suite.stages import TIMING, cell_row, pooled_row, read_json
+from rmbench.suite.stages import cell_row, pooled_row
 from rmbench.tasks import get_task
 from rmbench.video import write_atomic
 
 POLICY_TABLE = ("mem0", "mem0:no_memory", "dp", "act")
 ABLATION_TABLE = ("mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
                   "mem0:gt_classifier")
-
-
-DATA_WALLS = ("collect_wall_s", "copies_wall_s", "features_wall_s", "layout_copies_wall_s")
 
 
 def results(plan: Plan, out: Path, command: str = "",
@@ -47,8 +45,6 @@ def results(plan: Plan, out: Path, command: str = "",
              for task, columns in seeds.items()}
     timing = {t: read_json(Path(out) / t / TIMING, {}) for t in cells}
     collect = {t: timing[t].get("collect_wall_s") for t in cells}
-    # each task's data stages, shared by its cells (the pixel track's rendered copies and
-    # cached features; the state track's solved layout copies)
     data = {t: {k: timing[t][k] for k in DATA_WALLS if timing[t].get(k) is not None}
             for t in cells}
     levels = {t: asdict(chance(t)) for t in cells}
