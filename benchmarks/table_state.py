@@ -28,8 +28,13 @@ The camera table's file is made by its first record: the table's command, the ru
 and chance levels, and no cells yet.
 
 A recorded cell keeps the command that made it, the dataset format it trained on and its
-walls' ``conditions`` (``suite/records.py``), every field null until edited in by hand. The
-file is written atomically.
+walls' ``conditions`` (``suite/records.py``): what ``--machine``, ``--jobs-beside``,
+``--beside``, ``--threads``, ``--workers`` and ``--note`` say, every other field null. The file
+is written atomically.
+
+    python benchmarks/table_state.py --table runs/table_state --tasks battery_try \
+        --specs mem0 --seed 1 --dataset rmbench/2 --machine cpu --threads 1 --workers 1 \
+        --jobs-beside 1 --beside "another state-table training"
 """
 
 from __future__ import annotations
@@ -46,7 +51,7 @@ from rmbench.suite.records import (
     evaluation_rows,
     reads_subtask_cut,
     seed_records,
-    unstated_conditions,
+    stated_conditions,
 )
 from rmbench.suite.stages import pooled_row
 from rmbench.tasks.registry import recorded_gym_id
@@ -104,16 +109,19 @@ def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> 
 
 
 def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: str,
-           why: str, table: str, seed: int | None = None) -> dict:
+           why: str, table: str, seed: int | None = None,
+           conditions: dict | None = None) -> dict:
     """``doc`` with ``run``'s cells of ``tasks`` x ``specs`` in place of its own (or, with
-    ``seed``, added to its own as that training seed)."""
+    ``seed``, added to its own as that training seed); ``conditions``: the fields
+    ``stated_conditions`` writes into each new cell's walls' conditions."""
     replaced: dict[str, dict] = {}
     for task in tasks:
         for spec in specs:
             row = run["cells"].get(task, {}).get(spec)
             if row is None:
                 raise SystemExit(f"{table}: {task} {spec} is not evaluated yet")
-            new = {"conditions": unstated_conditions(spec), **cell_record(row, task),
+            new = {"conditions": stated_conditions(spec, **(conditions or {})),
+                   **cell_record(row, task),
                    "dataset": dataset, "command": run["command"]}
             if seed is not None:
                 # a table's column is its seeds' pool: it must be this seed alone
@@ -169,6 +177,14 @@ def main(argv: list[str] | None = None) -> int:
                    help="the table the cells belong to (default state)")
     p.add_argument("--out", type=Path, help="the results file (default "
                                             "benchmarks/results/table_<obs>.json)")
+    said = p.add_argument_group("the walls' conditions (suite/records.py; unstated when left out)")
+    said.add_argument("--machine", help="a key of the results' machines (cpu, h100, ...)")
+    said.add_argument("--jobs-beside", type=int, metavar="N",
+                      help="other jobs that shared the machine with each stage")
+    said.add_argument("--beside", metavar="TEXT", help="what those jobs were, in words")
+    said.add_argument("--threads", type=int, help="the training's torch threads")
+    said.add_argument("--workers", type=int, help="the evaluation's workers")
+    said.add_argument("--note", metavar="TEXT", help="anything else the walls need said")
     args = p.parse_args(argv)
     args.out = args.out or RESULTS / f"table_{args.obs}.json"
     if args.seed is not None and args.seed < 0:
@@ -184,9 +200,13 @@ def main(argv: list[str] | None = None) -> int:
     if not args.out.exists() and args.obs == "state":
         raise SystemExit(f"{args.out}: no such results file")
     doc = json.loads(args.out.read_text()) if args.out.exists() else new_table(run)
+    if args.machine is not None and args.machine not in doc.get("machines", {}):
+        raise SystemExit(f"--machine {args.machine}: not one of {args.out.name}'s machines "
+                         f"({', '.join(doc.get('machines', {}))})")
     doc = record(doc, run, args.tasks.split(","),
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
-                 args.seed)
+                 args.seed, {k: getattr(args, k) for k in (
+                     "machine", "jobs_beside", "beside", "threads", "workers", "note")})
     write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
     print(f"wrote {args.out}")
     return 0

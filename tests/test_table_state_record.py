@@ -228,3 +228,37 @@ def test_an_m1_seed_pools_across_dataset_formats_an_mn_seed_does_not(table_state
     assert doc["cells"]["swap_T"]["mem0"]["successes"] == 147
     with pytest.raises(SystemExit, match="seed 1 trained on rmbench/2"):
         table_state.record(doc, run, ["press_button"], ["mem0"], "rmbench/2", "x", "t", seed=1)
+
+
+def test_the_walls_conditions_are_written_from_the_command_line(table_state):
+    from rmbench.suite.records import stated_conditions
+
+    said = {"machine": "cpu", "threads": 1, "workers": 1, "jobs_beside": 2,
+            "beside": "a camera-table training", "note": None}
+    doc = table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2",
+                             "format 1", "t", conditions=said)
+    train, = doc["cells"]["press_button"]["mem0"]["conditions"]["train"]
+    ev, = doc["cells"]["press_button"]["mem0"]["conditions"]["eval"]
+    # each stage takes the fields it has: threads for the training, workers for the evaluation
+    assert train["threads"] == 1 and "workers" not in train
+    assert ev["workers"] == 1 and "threads" not in ev
+    assert train["jobs_beside"] == ev["jobs_beside"] == 2
+    assert train["beside"] == ev["beside"] == "a camera-table training"
+    assert train["note"] is None and train["steps"] is None  # not said: unstated
+    # gt_classifier evaluates Mem-0's checkpoint: no training piece to state
+    assert stated_conditions("mem0:gt_classifier", machine="cpu")["train"] == []
+    with pytest.raises(ValueError, match="no condition field wall"):
+        stated_conditions("mem0", wall=3)
+
+
+def test_an_unknown_machine_is_a_one_line_error(table_state, tmp_path):
+    import json
+
+    out = tmp_path / "table_state.json"
+    out.write_text(json.dumps({**_doc(), "machines": {"cpu": {}}}))
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / "table.json").write_text(json.dumps(_run()))
+    with pytest.raises(SystemExit, match="--machine tpu: not one of table_state.json's machines"):
+        table_state.main(["--table", str(folder), "--tasks", "press_button", "--specs", "mem0",
+                          "--dataset", "rmbench/2", "--out", str(out), "--machine", "tpu"])

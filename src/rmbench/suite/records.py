@@ -46,6 +46,22 @@ def unstated_conditions(spec: str) -> dict[str, list[dict[str, None]]]:
     return {"train": train, "eval": [dict.fromkeys(EVAL_CONDITIONS)]}
 
 
+def stated_conditions(spec: str, **fields: Any) -> dict[str, list[dict[str, Any]]]:
+    """``unstated_conditions(spec)`` with ``fields`` (``machine``, ``jobs_beside``,
+    ``beside``, ``note``, ``threads`` for a training, ``workers`` for an evaluation) written
+    into each stage's one piece where the stage has that field; a field given as None stays
+    unstated. An unknown field is a ValueError."""
+    known = set(TRAIN_CONDITIONS) | set(EVAL_CONDITIONS)
+    unknown = sorted(set(fields) - known)
+    if unknown:
+        raise ValueError(f"no condition field {', '.join(unknown)}; fields: {', '.join(sorted(known))}")
+    out = unstated_conditions(spec)
+    for pieces in out.values():
+        for piece in pieces:
+            piece.update({k: v for k, v in fields.items() if k in piece and v is not None})
+    return out
+
+
 def seed_records(cell: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """A cell's record per training seed (``{"0": ..., "1": ...}``): its ``seeds``, or the
     cell itself as seed 0 when it has one."""
