@@ -7,7 +7,8 @@ so a recipe choice reads episodes that no table reports.
         [--out benchmarks/results/validation_probes.json]
 
 CHANGE says in words what the probe changes against the table's recipe ("the recipe" for
-the checkpoint as trained). A probe of the same task, policy and change replaces its row.
+the checkpoint as trained), and may hold "=" (``mem0.sliding_window=16``): the folder is what
+follows the last one. A probe of the same task, policy and change replaces its row.
 """
 
 from __future__ import annotations
@@ -46,14 +47,19 @@ def probe_row(change: str, folder: Path) -> dict:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--probe", action="append", required=True, metavar="CHANGE=FOLDER")
+    p.add_argument("--trained-by", metavar="COMMAND",
+                   help="the command that trained the probes' checkpoint, where the probe "
+                        "changes the training (kept in their rows as trained_by)")
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
     doc = json.loads(args.out.read_text()) if args.out.exists() else {"probes": []}
     for item in args.probe:
-        change, sep, folder = item.partition("=")
+        change, sep, folder = item.rpartition("=")
         if not sep or not change.strip():
             raise SystemExit(f"--probe {item!r}: give CHANGE=FOLDER")
         row = probe_row(change.strip(), Path(folder))
+        if args.trained_by:
+            row["trained_by"] = args.trained_by
         key = (row["task"], row["policy"], row["change"])
         doc["probes"] = [r for r in doc["probes"]
                          if (r["task"], r["policy"], r["change"]) != key] + [row]

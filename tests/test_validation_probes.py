@@ -46,3 +46,13 @@ def test_test_episodes_and_unfinished_runs_are_refused(probes, tmp_path):
         probes.probe_row("x", _eval(tmp_path / "u", done=60))
     with pytest.raises(SystemExit, match="give CHANGE=FOLDER"):
         probes.main(["--probe", str(tmp_path / "t"), "--out", str(tmp_path / "o.json")])
+
+
+def test_a_change_may_hold_an_equals_sign_and_a_training_command(probes, tmp_path):
+    out = tmp_path / "probes.json"
+    a = _eval(tmp_path / "a", successes=72)
+    assert probes.main(["--probe", f"mem0.sliding_window=16={a}", "--out", str(out),
+                        "--trained-by", "rmbench table --set mem0.sliding_window=16"]) == 0
+    (row,) = json.loads(out.read_text())["probes"]
+    assert (row["change"], row["successes"]) == ("mem0.sliding_window=16", 72)
+    assert row["trained_by"] == "rmbench table --set mem0.sliding_window=16"
