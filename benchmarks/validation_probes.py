@@ -1,6 +1,7 @@
 """Recipe probes on the validation episodes: each ``rmbench eval --split validation`` folder
 given becomes one row of benchmarks/results/validation_probes.json (the task, the checkpoint
-and what the probe changes, success with its Wilson 95% interval, how the episodes ended),
+and what the probe changes, success with its Wilson 95% interval, how the episodes ended and
+in which stage of the task's plan the failed ones did),
 so a recipe choice reads episodes that no table reports.
 
     python benchmarks/validation_probes.py --probe "CHANGE=FOLDER" [--probe ...]
@@ -17,6 +18,8 @@ import argparse
 import json
 from pathlib import Path
 
+from rmbench.eval.endings import failures_by_stage
+from rmbench.eval.harness import read_records
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "validation_probes.json"
@@ -36,10 +39,12 @@ def probe_row(change: str, folder: Path) -> dict:
     ((task, res),) = summary["tasks"].items()
     if res["episodes"] < run["episodes"]:
         raise SystemExit(f"{folder}: {res['episodes']} of {run['episodes']} episodes so far")
+    records = folder / task / "episodes.jsonl"  # where the failures ended, where kept
+    failed_at = failures_by_stage(read_records(records)) if records.exists() else None
     return {"task": task, "change": change, "policy": run["policy"], "seed": run["seed"],
             "episodes": res["episodes"], "successes": res["successes"],
             "success_rate": res["success_rate"], "success_ci95": res["success_ci95"],
-            "endings": res["endings"], "gym_id": res.get("gym_id"),
+            "endings": res["endings"], "failed_at": failed_at, "gym_id": res.get("gym_id"),
             "command": f"rmbench eval --task {task} --policy '{run['policy']}' --episodes "
                        f"{run['episodes']} --split validation --seed {run['seed']}"}
 

@@ -56,3 +56,18 @@ def test_a_change_may_hold_an_equals_sign_and_a_training_command(probes, tmp_pat
     (row,) = json.loads(out.read_text())["probes"]
     assert (row["change"], row["successes"]) == ("mem0.sliding_window=16", 72)
     assert row["trained_by"] == "rmbench table --set mem0.sliding_window=16"
+
+
+def test_a_probe_keeps_the_stage_its_failures_ended_in(probes, tmp_path):
+    folder = _eval(tmp_path / "a", successes=99)
+    (folder / "put_back_block").mkdir()
+    events = [[0, "task", "subtask", "move the block to the centre"],
+              [90, "task", "subtask", "put the block back on its original mat"]]
+    (folder / "put_back_block" / "episodes.jsonl").write_text("\n".join(json.dumps(r) for r in (
+        {"success": True, "events": events[:1], "reason": "success", "message": ""},
+        {"success": False, "events": events, "reason": "task_failure",
+         "message": "button pressed more than once"})) + "\n")
+    row = probes.probe_row("x", folder)
+    assert row["failed_at"] == {"put the block back on its original mat":
+                                {"button pressed more than once": 1}}
+    assert probes.probe_row("x", _eval(tmp_path / "b"))["failed_at"] is None  # no records kept
