@@ -169,8 +169,10 @@ def _footnote(table: str, lead: str = "", marks: str | None = None) -> str:
         notes.append(f"{lead.format(mark='‡') + ' run' if lead else '‡'} on an earlier version of the task "
                      "(CHANGELOG.md, 2026-11-28: battery_try-v1 counted a try while the arm "
                      "that made it was still over the holder, v2 while it still turned its "
-                     "wrist back home; swap_blocks-v1 left a hand half open, which told a "
-                     "later moment from the first); not re-run on the current version yet.")
+                     "wrist back home, v3 never under the collection's action noise, so its "
+                     "datasets held one subtask; swap_blocks-v1 left a hand half open, which "
+                     "told a later moment from the first); not re-run on the current version "
+                     "yet.")
     return "".join(f"\n{n}\n" for n in notes)
 
 

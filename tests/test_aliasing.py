@@ -32,7 +32,8 @@ from a drawn one, so the test bounds the core ratio.
 The arms' joints, which every policy reads, agree at the pair as well (largest difference over
 the twelve arm joints at most 0.004 rad, swap_blocks'). battery_try's pair is the frame each
 try is counted at, where a planner chooses the next flip: the task counts a try only with both
-arms home and settled (battery_try-v3). Counted as the cell went in (v1), the arm that had set
+arms home and settled (battery_try-v3; v4 averages the arms over half a second, so that a try
+is counted under the collection's action noise too). Counted as the cell went in (v1), the arm that had set
 it down was still over its slot there; counted as its gripper came within 3 cm of home (v2),
 it was still turning its wrist back, 0.1-0.2 rad off: either showed which arm moved last, and
 so which flip came next. ``test_battery_try_counts_show_no_arm`` checks every count. The
@@ -88,3 +89,31 @@ def test_battery_try_counts_show_no_arm():
             assert info["is_success"] and len(at_counts) >= 3, (seed, correct)
             arms = np.stack(at_counts)[:, [i for i in range(14) if i not in (6, 13)]]
             assert np.abs(arms[:, None] - arms[None]).max() < 0.01, (seed, correct)
+
+
+def test_battery_try_counts_every_try_under_the_collections_noise():
+    """The datasets are collected with executed action noise (white, 0.02 rad: the tables'
+    recipe); each try must still be counted there, or the dataset holds one subtask and the
+    planner has nothing to decide (v3 read the arms per step and counted none)."""
+    from rmbench.envs.noise import NoiseSpec, perturber
+    from rmbench.envs.registration import make
+    from rmbench.experts import make_expert
+
+    env = make("battery_try", render=False)
+    # seeds the expert solves under this noise (on others it gives up, as a collection skips)
+    for seed, correct in ((100000, (0, 1)), (100002, (1, 1))):
+        expert = make_expert(env)
+        obs, info = env.reset(seed=seed, options={"hidden": {"correct": correct}})
+        expert.reset(info["instruction"], info)
+        noisy = perturber(NoiseSpec(kind="white", sigma=0.02), seed, env)
+        steps = [info["subtask_step"]]
+        for _ in range(env.unwrapped.step_limit):
+            obs, _, terminated, truncated, info = env.step(noisy(expert.act(obs)))
+            if info["subtask_step"] != steps[-1]:
+                steps.append(info["subtask_step"])
+            if terminated or truncated:
+                break
+        plan = env.unwrapped.task.plan()
+        assert info["is_success"], (seed, correct)
+        # every step of the plan counted in turn, then done
+        assert steps == list(range(len(plan) + 1)), (seed, correct, steps)

@@ -11,6 +11,7 @@ the ground-truth subtask all derive from those predicates in :mod:`rmbench.envs.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -20,13 +21,16 @@ import numpy as np
 from rmbench.sim import robot
 from rmbench.sim.station import HOME_ARM, TABLE_TOP
 
-# An arm with every joint within HOME_JOINT_TOL (rad) of its home angle, moving slower than
-# HOME_JOINT_SPEED (rad/s), is back home and settled there. A test on the gripper's position
-# alone passed while the arm that had just come back still turned its wrist, 0.1-0.2 rad from
-# home, which told which arm had made the last move. An arm at rest reads within 0.003 rad of
-# home; one just back, counted under these bounds, within 0.005.
-HOME_JOINT_TOL = 0.005
-HOME_JOINT_SPEED = 0.03
+# Both arms are back home and settled once every arm joint, averaged over the last
+# HOME_WINDOW control steps (0.5 s), lies within HOME_JOINT_TOL (rad) of its home angle. A
+# test on the gripper's position alone passed while the arm that had just come back still
+# turned its wrist, 0.1-0.2 rad from home, which told which arm had made the last move; the
+# average over the window passes only once that arm has been home for most of it. Averaged,
+# not read per step: the collection's executed action noise (white, 0.02 rad) keeps an arm
+# at home 0.02-0.03 rad from it at any one step and moving at 0.3-0.6 rad/s, while its
+# 0.5-s average stays within 0.003-0.007 (0.0002-0.0006 without the noise).
+HOME_WINDOW = 10
+HOME_JOINT_TOL = 0.01
 
 
 @dataclass(frozen=True)
@@ -85,6 +89,7 @@ class Task:
         self.data: mujoco.MjData | None = None
         self._stage = 0
         self._best_progress = 0.0
+        self._home_gaps: deque[np.ndarray] = deque(maxlen=HOME_WINDOW)
         self.overrides: dict[str, Any] = {}
 
     # -- the episode protocol -----------------------------------------------------------
@@ -96,6 +101,7 @@ class Task:
         self.set_overrides(hidden)
         self._stage = 0
         self._best_progress = 0.0
+        self._home_gaps: deque[np.ndarray] = deque(maxlen=HOME_WINDOW)
         self.initialize(rng)
 
     # -- hooks ------------------------------------------------------------------------
@@ -196,14 +202,16 @@ class Task:
         return False
 
     def hands_home(self) -> bool:
-        """Both arms back home and settled: every arm joint within ``HOME_JOINT_TOL`` of its
-        home angle and slower than ``HOME_JOINT_SPEED``. battery_try counts a try only then,
-        as the benchmark's reference ends each try with the arm back at its origin: the frame
-        the next try is chosen at must show neither which arm made the last move nor that one
-        is still on its way back."""
-        gap = np.abs(self.data.qpos[self._arm_qpos] - self._home_qpos)
-        speed = np.abs(self.data.qvel[self._arm_dof])
-        return bool(gap.max() <= HOME_JOINT_TOL and speed.max() <= HOME_JOINT_SPEED)
+        """Both arms back home and settled: every arm joint, averaged over this and the
+        previous ``HOME_WINDOW - 1`` control steps, within ``HOME_JOINT_TOL`` of its home
+        angle. Reads the window it keeps, so a task calls it once per control step (from
+        ``evaluate``). battery_try counts a try only then, as the benchmark's reference ends
+        each try with the arm back at its origin: the frame the next try is chosen at must
+        show neither which arm made the last move nor that one is still on its way back."""
+        self._home_gaps.append(self.data.qpos[self._arm_qpos] - self._home_qpos)
+        if len(self._home_gaps) < HOME_WINDOW:
+            return False
+        return bool(np.abs(np.mean(self._home_gaps, axis=0)).max() <= HOME_JOINT_TOL)
 
     def touched_by_fingers(self, body_id: int) -> bool:
         """Whether any gripper finger is in contact with ``body_id``."""

@@ -24,10 +24,12 @@ Failure: a battery off the table.
 Memory: TMC M(n). Aliasing point: the slots' contact plates hide the cells' ends from the
 head camera, so after a failed try the holder looks like after any other failed try; only the
 past tells which pairs were already tried. A try counts only with both arms home and settled
-(every arm joint within ``HOME_JOINT_TOL`` of home and slower than ``HOME_JOINT_SPEED``,
-``tasks/base.py``), so the view after the inserts is that view too, arms included: nothing
-shows which arm moved last. Without memory, flipping either cell at random finds the pair
-within the step limit 75% of the time (``eval/chance.py``).
+(every arm joint, averaged over the last ``HOME_WINDOW`` control steps, within
+``HOME_JOINT_TOL`` of home, ``tasks/base.py``), so the view after the inserts is that view
+too, arms included: nothing shows which arm moved last. Averaged, so that the count holds
+under the collection's executed action noise too (v3 read each step: under that noise no try
+was ever counted, and its datasets held one subtask). Without memory, flipping either cell at
+random finds the pair within the step limit 75% of the time (``eval/chance.py``).
 """
 
 from __future__ import annotations
@@ -68,7 +70,7 @@ def flips(correct: tuple[int, int]) -> list[int]:
 @register
 class BatteryTry(Task):
     name = "battery_try"
-    gym_id = "rmbench/BatteryTry-v3"
+    gym_id = "rmbench/BatteryTry-v4"
     tmc = "M(n)"
     step_limit = 1200
     subtasks = ("insert the left battery", "insert the right battery",
