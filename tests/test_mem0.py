@@ -856,3 +856,18 @@ def test_the_executor_digest_reads_the_executor_alone_scalars_included():
     assert executor_digest(weights) == digest
     weights["executor.scale"] += 1
     assert executor_digest(weights) != digest
+
+
+def test_a_dataset_of_one_plan_step_per_episode_is_refused(mn_dataset, tmp_path, monkeypatch):
+    """An M(n) dataset whose task counted none of its steps (battery_try-v3 under action
+    noise) leaves the planner nothing to decide: a one-line error, not a trained planner."""
+    read = Dataset.episode
+
+    def one_step(self, *args, **kwargs):
+        ep = read(self, *args, **kwargs)
+        return replace(ep, subtask_index=np.zeros_like(ep.subtask_index),
+                       subtask_step=np.zeros_like(ep.subtask_step))
+
+    monkeypatch.setattr(Dataset, "episode", one_step)
+    with pytest.raises(ValueError, match="every episode holds one step of its task's plan"):
+        train_tiny(mn_dataset, tmp_path / "p", steps=1, cfg=TINY_STATE)

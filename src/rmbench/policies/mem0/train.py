@@ -280,6 +280,12 @@ def fit_planner(model: Mem0Model, ds: Dataset, cfg: Mem0Config, train_cfg: Train
     episodes = [ds.episode(e, cameras=[]) for e in range(ds.num_episodes)]
     examples = [x for e, ep in enumerate(episodes)
                 for x in planner_examples(e, ep.subtask_index, ep.subtask_step, done)]
+    if len(examples) == 2 * len(episodes):
+        # one step per episode: the task counted none of its plan's steps while the data was
+        # collected (battery_try-v3 under action noise), so there is nothing to plan
+        raise ValueError(f"{ds.root}: every episode holds one step of its task's plan, so the "
+                         f"planner has no decision to learn; collect the data again with a "
+                         f"version of {ds.task} that counts its steps")
     frames = planner_frames(ds, cfg)
     gen = torch.Generator().manual_seed(train_cfg.seed)
     device = torch.device("cuda" if train_cfg.device.startswith("cuda") else "cpu")
