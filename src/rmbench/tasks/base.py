@@ -101,7 +101,7 @@ class Task:
         self.set_overrides(hidden)
         self._stage = 0
         self._best_progress = 0.0
-        self._home_gaps: deque[np.ndarray] = deque(maxlen=HOME_WINDOW)
+        self._home_gaps.clear()  # the arms' window starts with the episode
         self.initialize(rng)
 
     # -- hooks ------------------------------------------------------------------------
