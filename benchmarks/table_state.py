@@ -29,8 +29,8 @@ and chance levels, and no cells yet.
 
 A recorded cell keeps the command that made it, the dataset format it trained on and its
 walls' ``conditions`` (``suite/records.py``): what ``--machine``, ``--jobs-beside``,
-``--beside``, ``--threads``, ``--workers`` and ``--note`` say, every other field null. The file
-is written atomically.
+``--beside``, ``--threads``, ``--workers``, ``--note`` and ``--train-note`` say, every other
+field null. The file is written atomically.
 
     python benchmarks/table_state.py --table runs/table_state --tasks battery_try \
         --specs mem0 --seed 1 --dataset rmbench/2 --machine cpu --threads 1 --workers 1 \
@@ -113,14 +113,17 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
            conditions: dict | None = None) -> dict:
     """``doc`` with ``run``'s cells of ``tasks`` x ``specs`` in place of its own (or, with
     ``seed``, added to its own as that training seed); ``conditions``: the fields
-    ``stated_conditions`` writes into each new cell's walls' conditions."""
+    ``stated_conditions`` writes into each new cell's walls' conditions (``train_note`` into
+    its training's alone)."""
     replaced: dict[str, dict] = {}
     for task in tasks:
         for spec in specs:
             row = run["cells"].get(task, {}).get(spec)
             if row is None:
                 raise SystemExit(f"{table}: {task} {spec} is not evaluated yet")
-            new = {"conditions": stated_conditions(spec, **(conditions or {})),
+            said = dict(conditions or {})
+            train = {"note": said.pop("train_note", None)}  # the training's wall alone
+            new = {"conditions": stated_conditions(spec, {"train": train}, **said),
                    **cell_record(row, task),
                    "dataset": dataset, "command": run["command"]}
             if seed is not None:
@@ -185,6 +188,8 @@ def main(argv: list[str] | None = None) -> int:
     said.add_argument("--threads", type=int, help="the training's torch threads")
     said.add_argument("--workers", type=int, help="the evaluation's workers")
     said.add_argument("--note", metavar="TEXT", help="anything else the walls need said")
+    said.add_argument("--train-note", metavar="TEXT",
+                      help="what the training's wall alone needs said (it ran in pieces, ...)")
     args = p.parse_args(argv)
     args.out = args.out or RESULTS / f"table_{args.obs}.json"
     if args.seed is not None and args.seed < 0:
@@ -206,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = record(doc, run, args.tasks.split(","),
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
                  args.seed, {k: getattr(args, k) for k in (
-                     "machine", "jobs_beside", "beside", "threads", "workers", "note")})
+                     "machine", "jobs_beside", "beside", "threads", "workers", "note", "train_note")})
     write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
     print(f"wrote {args.out}")
     return 0

@@ -245,6 +245,15 @@ def test_the_walls_conditions_are_written_from_the_command_line(table_state):
     assert train["jobs_beside"] == ev["jobs_beside"] == 2
     assert train["beside"] == ev["beside"] == "a camera-table training"
     assert train["note"] is None and train["steps"] is None  # not said: unstated
+    # a note for the training alone (it ran in pieces) stays off the evaluation's wall
+    said = {**said, "note": "shared", "train_note": "in two pieces"}
+    doc = table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2",
+                             "format 1", "t", conditions=said)
+    train, = doc["cells"]["press_button"]["mem0"]["conditions"]["train"]
+    ev, = doc["cells"]["press_button"]["mem0"]["conditions"]["eval"]
+    assert (train["note"], ev["note"]) == ("in two pieces", "shared")
+    with pytest.raises(ValueError, match="no stage check"):
+        stated_conditions("mem0", {"check": {"note": "x"}})
     # gt_classifier evaluates Mem-0's checkpoint: no training piece to state
     assert stated_conditions("mem0:gt_classifier", machine="cpu")["train"] == []
     with pytest.raises(ValueError, match="no condition field wall"):

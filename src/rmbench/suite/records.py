@@ -46,19 +46,26 @@ def unstated_conditions(spec: str) -> dict[str, list[dict[str, None]]]:
     return {"train": train, "eval": [dict.fromkeys(EVAL_CONDITIONS)]}
 
 
-def stated_conditions(spec: str, **fields: Any) -> dict[str, list[dict[str, Any]]]:
+def stated_conditions(spec: str, stages: dict[str, dict[str, Any]] | None = None,
+                      **fields: Any) -> dict[str, list[dict[str, Any]]]:
     """``unstated_conditions(spec)`` with ``fields`` (``machine``, ``jobs_beside``,
     ``beside``, ``note``, ``threads`` for a training, ``workers`` for an evaluation) written
-    into each stage's one piece where the stage has that field; a field given as None stays
-    unstated. An unknown field is a ValueError."""
+    into each stage's one piece where the stage has that field, then ``stages``' fields into
+    the named stage's alone (``{"train": {"note": ...}}``: what only the training needs
+    said); a field given as None stays unstated. An unknown field or stage is a ValueError."""
+    stages = stages or {}
     known = set(TRAIN_CONDITIONS) | set(EVAL_CONDITIONS)
-    unknown = sorted(set(fields) - known)
+    unknown = sorted(set(fields).union(*stages.values()) - known)
     if unknown:
         raise ValueError(f"no condition field {', '.join(unknown)}; fields: {', '.join(sorted(known))}")
     out = unstated_conditions(spec)
-    for pieces in out.values():
+    if set(stages) - set(out):
+        raise ValueError(f"no stage {', '.join(sorted(set(stages) - set(out)))}; stages: "
+                         f"{', '.join(out)}")
+    for stage, pieces in out.items():
         for piece in pieces:
-            piece.update({k: v for k, v in fields.items() if k in piece and v is not None})
+            for said in (fields, stages.get(stage, {})):
+                piece.update({k: v for k, v in said.items() if k in piece and v is not None})
     return out
 
 
