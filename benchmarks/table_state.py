@@ -115,15 +115,15 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
     ``seed``, added to its own as that training seed); ``conditions``: the fields
     ``stated_conditions`` writes into each new cell's walls' conditions (``train_note`` into
     its training's alone)."""
+    said = dict(conditions or {})
+    stages = {"train": {"note": said.pop("train_note", None)}}  # the training's wall alone
     replaced: dict[str, dict] = {}
     for task in tasks:
         for spec in specs:
             row = run["cells"].get(task, {}).get(spec)
             if row is None:
                 raise SystemExit(f"{table}: {task} {spec} is not evaluated yet")
-            said = dict(conditions or {})
-            train = {"note": said.pop("train_note", None)}  # the training's wall alone
-            new = {"conditions": stated_conditions(spec, {"train": train}, **said),
+            new = {"conditions": stated_conditions(spec, stages, **said),
                    **cell_record(row, task),
                    "dataset": dataset, "command": run["command"]}
             if seed is not None:
