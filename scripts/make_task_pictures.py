@@ -1,5 +1,5 @@
 """docs/tasks/<task>.png: the head camera at the first frame, then the task's two aliasing
-moments (``Task.aliasing_pair``): alike to the camera, different next actions.
+moments (``Task.aliasing_pairs[0]``): alike to the camera, different next actions.
 
     .venv/bin/python scripts/make_task_pictures.py [--seed 100000] [--out docs/tasks]
 """
@@ -32,7 +32,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     for name, cls in sorted(rmbench.TASKS.items()):
         frames = [first_frame(name, args.seed)]
-        frames += [capture(name, args.seed, *m).frame for m in cls.aliasing_pair]
+        frames += [capture(name, args.seed, *m).frame for m in cls.aliasing_pairs[0]]
         gap = np.full((frames[0].shape[0], 6, 3), 255, np.uint8)
         row = [frames[0], gap, frames[1], gap, frames[2]]
         Image.fromarray(np.concatenate(row, axis=1)).save(out / f"{name}.png")

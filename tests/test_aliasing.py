@@ -1,5 +1,9 @@
-"""Every task has an aliasing point: two moments that look alike to the head camera but need
-different actions. That is what makes the benchmark's tasks memory tasks.
+"""Every task has aliasing points: pairs of moments its expert's plan revisits
+(``Task.aliasing_pairs``) that look alike to the head camera but need different actions. That
+is what makes the benchmark's tasks memory tasks. The camera is compared on the scene (the
+robot's pixels left out) and the arms by their joints: a fraction of a degree between two
+moments moves the arms' edges by a pixel, which the whole frame counts (battery_try, after the
+inserts against after a flip: whole-frame ratio 0.53, the scene's 0.006, the arms 0.005 rad).
 
 The same holds for the state observation (``Task.environment_state``): at the two moments no
 flag, one-hot, colour, lamp or digit differs (what a cover, the screen or the holder hides is
@@ -8,7 +12,8 @@ in a fixed order would put them a tray or a mat apart: 0.15 m in swap_blocks, 0.
 rearrange_blocks), and the vectors are far closer than two layouts are. So a state policy
 needs memory exactly where a pixel policy does.
 
-Euclidean distances, measured (seed 100000, ``benchmarks/aliasing.py``): the pair's; the mean
+Euclidean distances, measured at the headline pairs (seed 100000, ``benchmarks/aliasing.py``,
+which measures every pair on four seeds): the pair's; the mean
 over the first frames of seed 100000 and each of 100001-100008; their ratio; the ratio
 without the headings of symmetric pieces ("core"). In brackets the ratios from seed 100004.
 
@@ -30,7 +35,7 @@ cubes show traded yaws (in the frames too), up to 0.4 rad apart. No frame tells 
 from a drawn one, so the test bounds the core ratio.
 
 The arms' joints, which every policy reads, agree at the pair as well (largest difference over
-the twelve arm joints at most 0.004 rad, swap_blocks'). battery_try's pair is the frame each
+the twelve arm joints at most 0.005 rad, battery_try's). battery_try's pairs is the frame each
 try is counted at, where a planner chooses the next flip: the task counts a try only with both
 arms home and settled (battery_try-v3; v4 averages the arms over half a second, so that a try
 is counted under the collection's action noise too). Counted as the cell went in (v1), the arm that had set
@@ -39,28 +44,46 @@ it was still turning its wrist back, 0.1-0.2 rad off: either showed which arm mo
 so which flip came next. ``test_battery_try_counts_show_no_arm`` checks every count. The
 grippers agree too (at most 0.025 apart, swap_T's): swap_blocks' pair is the episode's first
 step against its end, where its v1 expert had left a hand half open, 0.40 from the opening at
-reset (swap_blocks-v2 reopens it).
+reset (swap_blocks-v2 reopens it). rearrange_blocks-v1's expert kept the pressing hand closed
+on its way home, so that at home with both mats loaded the hand told whether the press was
+made (0.96 apart); v2 reopens it there.
 """
 
+import pytest
+
 from rmbench.aliasing import measure
+from rmbench.tasks.registry import ordered
 
 STATE_RATIO = 0.2  # the core ratio's bound; measured at most 0.085 (swap_blocks)
-ARM_GAP = 0.05  # rad, the arm joints' bound; measured at most 0.004 (swap_blocks)
+ARM_GAP = 0.05  # rad, the arm joints' bound; measured at most 0.005 (battery_try)
 GRIPPER_GAP = 0.05  # the grippers' (0 closed, 1 open); measured at most 0.025 (swap_T)
 
+PAIRS = [(cls.name, k) for cls in ordered() for k in range(len(cls.aliasing_pairs))]
 
-def test_aliasing_point(task_name):
-    r = measure(task_name, seed=100000)
-    # near-identical: far closer than the same moment in an unrelated layout
-    assert r.pixel_distance < 0.5 * r.unrelated_distance, r
+
+@pytest.mark.parametrize("task_name, pair", PAIRS, ids=[f"{t}-{k}" for t, k in PAIRS])
+def test_aliasing_pair(task_name, pair):
+    """Every pair of moments a task's plan revisits (``Task.aliasing_pairs``) looks alike to
+    the head camera, in the state vector and in the arms, while the expert goes on differently.
+    """
+    r = measure(task_name, seed=100000, pair=pair)
+    # the scene near-identical: far closer than the same moment in an unrelated layout (the
+    # robot's pixels left out; the arms are held to their joints below)
+    assert r.scene_distance < 0.5 * r.unrelated_scene_distance, r
     # and yet the expert goes on differently
     assert r.next_subtasks[0] != r.next_subtasks[1] or r.action_divergence > 0.1, r
     # the state observation aliases too
     assert not r.state_discrete_differ, r
     assert r.state_position_jitter < 0.02, r
     assert r.state_ratio_core < STATE_RATIO, r
-    # and so do the arms and the hands
+    # and so do the arms and the hands (rearrange_blocks-v1 left the pressing hand closed:
+    # 0.96 apart before and after the press)
     assert r.arm_gap < ARM_GAP and r.gripper_gap < GRIPPER_GAP, r
+
+
+def test_aliasing_pair_out_of_range_is_a_clear_error():
+    with pytest.raises(ValueError, match="aliasing pairs 0-0, not 1"):
+        measure("observe_and_pickup", pair=1)
 
 
 def test_battery_try_counts_show_no_arm():

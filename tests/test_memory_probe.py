@@ -136,7 +136,7 @@ def test_the_policy_is_reset_at_the_aliasing_step_of_every_task(task_name):
     cls = type(env.unwrapped.task)
     # the aliasing moment further into the plan: its hidden values make an episode that goes
     # past the aliasing stage before it ends (a lucky first try may end it before)
-    hidden, _, _ = max(cls.aliasing_pair, key=lambda m: m[1])
+    hidden, _, _ = max(cls.aliasing_pairs[0], key=lambda m: m[1])
     env = FixHidden(env, hidden)
     try:
         stage = cls.aliasing_stage

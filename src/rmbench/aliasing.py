@@ -1,7 +1,8 @@
 """Aliasing points, measured: why each task needs memory.
 
-Every task names two moments (``Task.aliasing_pair``): each is a set of fixed hidden
-variables, a stage of the plan, and which expert segment start after reaching that stage.
+Every task names the pairs of moments its expert's plan revisits (``Task.aliasing_pairs``,
+the first its headline): each moment is a set of fixed hidden variables, a stage of the plan,
+and which expert segment start after reaching that stage.
 Run from the same seed, the two moments should look alike to the head camera while the
 expert's next subtask (or, where the text is the same, its next actions) differ. The pixel
 distance is compared with the same moment in an unrelated seed. The distance between the two
@@ -16,11 +17,12 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+import mujoco
 import numpy as np
 
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
-from rmbench.sim.robot import JOINT_NAMES
+from rmbench.sim.robot import JOINT_NAMES, SIDES
 from rmbench.tasks import get_task
 from rmbench.tasks.state import is_continuous, symmetric_heading
 
@@ -37,6 +39,9 @@ class Moment:
     state: np.ndarray | None = None  # the task's environment_state() at the moment
     first_state: np.ndarray | None = None  # ... and at the episode's first frame
     joints: np.ndarray | None = None  # the arms' joint positions at the moment (agent_pos)
+    robot: np.ndarray | None = None  # HxW bool: the frame's pixels that show the robot
+    first_frame: np.ndarray | None = None  # the episode's first frame, and its robot pixels
+    first_robot: np.ndarray | None = None
 
 
 @dataclass
@@ -47,6 +52,15 @@ class AliasingResult:
     pixel_distance: float  # mean |difference| (0-255) between the two moments
     unrelated_distance: float  # the first moment vs the same moment in the unrelated seed
     ratio: float
+    # The scene alone (the robot's pixels in either frame left out): the pair's distance
+    # against that between the first frames of ``seed`` and ``unrelated_seed`` (how far two
+    # layouts look apart, as for the state below; at some moments the same moment of another
+    # layout shows next to nothing of it, e.g. swap_T's Ts held up). The arms are compared by
+    # their joints below: at a fraction of a degree apart their edges still move by a pixel,
+    # which the whole frame counts on tables that differ little between layouts (battery_try).
+    scene_distance: float
+    unrelated_scene_distance: float
+    scene_ratio: float
     next_subtasks: tuple[str, str]
     action_divergence: float  # max |difference| of the expert's actions from there on (rad)
     steps: tuple[int, int]
@@ -70,6 +84,7 @@ class AliasingResult:
     arm_gap: float = float("nan")
     arm_entry: str = ""  # the arm joint that differs most
     gripper_gap: float = float("nan")
+    pair: int = 0  # which of ``Task.aliasing_pairs``
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -89,7 +104,11 @@ def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
         first_state = env.unwrapped.task.environment_state()
         plan = info["plan"]
         reached, seen, frame, step = info["subtask_step"] >= stage, 0, None, 0
-        state, joints, found = None, None, False
+        state, joints, found, robot = None, None, False, None
+        first_frame = first_robot = None
+        if render:
+            first_frame = env.unwrapped.sim.render(["head"], width, height)["head"]
+            first_robot = robot_pixels(env.unwrapped.sim, "head", width, height)
         actions: list[np.ndarray] = []
         for t in range(env.unwrapped.step_limit):
             action = expert.act(obs)
@@ -101,6 +120,7 @@ def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
                     joints = np.asarray(obs["agent_pos"], dtype=float)
                     if render:
                         frame = env.unwrapped.sim.render(["head"], width, height)["head"]
+                        robot = robot_pixels(env.unwrapped.sim, "head", width, height)
             if found:
                 actions.append(action)
             obs, _, terminated, truncated, info = env.step(action)
@@ -112,13 +132,33 @@ def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
                                f"segment {segment} with {hidden}")
         subtasks = get_task(task).subtasks
         return Moment(frame, step, subtasks[plan[stage]] if stage < len(plan) else "done",
-                      np.array(actions), state, first_state, joints)
+                      np.array(actions), state, first_state, joints, robot, first_frame,
+                      first_robot)
     finally:
         env.close()
 
 
-def pixel_distance(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.abs(a.astype(np.int16) - b.astype(np.int16)).mean())
+def robot_pixels(sim, camera: str, width: int, height: int) -> np.ndarray:
+    """(H, W) bool: the pixels of ``camera`` that show a geom of either arm (segmentation
+    rendering; the colour renderer is left as it was)."""
+    r = sim.renderer(width, height)
+    r.enable_segmentation_rendering()
+    try:
+        r.update_scene(sim.data, camera=camera)
+        seg = r.render()
+    finally:
+        r.disable_segmentation_rendering()
+    m = sim.model
+    arm = np.array([m.body(int(b)).name.startswith(tuple(f"{s}/" for s in SIDES))
+                    for b in m.geom_bodyid])
+    is_geom = seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)
+    return is_geom & arm[np.clip(seg[..., 0], 0, len(arm) - 1)]
+
+
+def pixel_distance(a: np.ndarray, b: np.ndarray, keep: np.ndarray | None = None) -> float:
+    """Mean |difference| (0-255) over all pixels, or over those ``keep`` marks."""
+    d = np.abs(a.astype(np.int16) - b.astype(np.int16))
+    return float(d.mean() if keep is None else d[keep].mean())
 
 
 def state_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -138,26 +178,34 @@ def first_states(task: str, seeds) -> np.ndarray:
 
 
 def measure(task: str, seed: int = 100000, unrelated_seed: int | None = None,
-            pixels: bool = True) -> AliasingResult:
-    """The aliasing pair of ``task`` from ``seed`` against the first moment in
-    ``unrelated_seed``; ``pixels=False`` skips rendering (the pixel fields are then NaN)."""
+            pixels: bool = True, pair: int = 0) -> AliasingResult:
+    """The ``pair``-th aliasing pair of ``task`` (``Task.aliasing_pairs``; 0, the headline)
+    from ``seed`` against its first moment in ``unrelated_seed``; ``pixels=False`` skips
+    rendering (the pixel fields are then NaN)."""
     cls = get_task(task)
+    if not 0 <= pair < len(cls.aliasing_pairs):
+        raise ValueError(f"{cls.name} has aliasing pairs 0-{len(cls.aliasing_pairs) - 1}, "
+                         f"not {pair}")
+    moments = cls.aliasing_pairs[pair]
     unrelated_seed = seed + 1 if unrelated_seed is None else unrelated_seed
-    a, b = (capture(cls.name, seed, *m, render=pixels) for m in cls.aliasing_pair)
-    other = capture(cls.name, unrelated_seed, *cls.aliasing_pair[0], render=pixels)
+    a, b = (capture(cls.name, seed, *m, render=pixels) for m in moments)
+    other = capture(cls.name, unrelated_seed, *moments[0], render=pixels)
     if pixels:
         d, d_other = pixel_distance(a.frame, b.frame), pixel_distance(a.frame, other.frame)
+        s = pixel_distance(a.frame, b.frame, ~(a.robot | b.robot))
+        s_other = pixel_distance(a.first_frame, other.first_frame,
+                                 ~(a.first_robot | other.first_robot))
     else:
-        d = d_other = float("nan")
+        d = d_other = s = s_other = float("nan")
     names = cls.state_names
     firsts = first_states(cls.name, [seed, *range(unrelated_seed,
                                                   unrelated_seed + UNRELATED_FIRST_FRAMES)])
     core = np.array([not symmetric_heading(n) for n in names])
     ratios = []
     for keep in (np.ones(len(names), bool), core):
-        pair = state_distance(a.state[keep], b.state[keep])
+        between = state_distance(a.state[keep], b.state[keep])
         apart = float(np.mean([state_distance(firsts[0][keep], f[keep]) for f in firsts[1:]]))
-        ratios.append((pair, apart, pair / max(apart, 1e-9)))
+        ratios.append((between, apart, between / max(apart, 1e-9)))
     gap = np.abs(a.state - b.state)
     worst = names[int(np.argmax(gap))]
     discrete = tuple(n for n, g in zip(names, gap, strict=True) if g > 0 and not is_continuous(n))
@@ -169,9 +217,10 @@ def measure(task: str, seed: int = 100000, unrelated_seed: int | None = None,
     pad = [np.concatenate([m.actions, np.repeat(m.actions[-1:], n - len(m.actions), 0)])
            for m in (a, b)]
     return AliasingResult(cls.name, seed, unrelated_seed, round(d, 3), round(d_other, 3),
-                          round(d / max(d_other, 1e-9), 3), (a.next_subtask, b.next_subtask),
+                          round(d / max(d_other, 1e-9), 3), round(s, 3), round(s_other, 3),
+                          round(s / max(s_other, 1e-9), 3), (a.next_subtask, b.next_subtask),
                           round(float(np.abs(pad[0] - pad[1]).max()), 3), (a.step, b.step),
                           *(round(v, 4) for v in ratios[0]), round(ratios[1][2], 4), worst,
                           discrete, round(float(jitter), 4),
                           round(float(arm_gap.max()), 4), _ARM_JOINTS[int(np.argmax(arm_gap))],
-                          round(float(gripper_gap.max()), 4))
+                          round(float(gripper_gap.max()), 4), pair)

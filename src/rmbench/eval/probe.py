@@ -2,7 +2,7 @@
 
 ``--memory-reset aliasing`` calls the policy's ``reset`` once, right after the environment
 step at which the task's ground-truth stage first reaches ``Task.aliasing_stage`` (the point
-after which only the past tells the right next move apart, ``Task.aliasing_pair``);
+after which only the past tells the right next move apart, ``Task.aliasing_pairs``);
 ``--memory-reset every:K`` calls it after every K-th step. Whatever the policy carries is
 lost there: its own state through ``reset`` (the episode's instruction and task facts are
 handed again, as at the start) and the actions of a chunk it returned earlier and had not

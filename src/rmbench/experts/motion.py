@@ -25,6 +25,7 @@ CARRY_SPEED = 0.30  # m/s
 FINE_SPEED = 0.15  # m/s, last centimetres of descents
 JOINT_SPEED = 1.6  # rad/s, joint-space moves
 CLOSED, OPEN = 0.0, 1.0
+OPEN_SETTLE = 15  # steps for fingers reopened at home to come to rest
 # Joint feedback: every step the measured joints are compared with where the servos should
 # be (the commands sent, through the servos' known lag) and the difference, low-passed with
 # this gain per step, is taken off the next command. A slow error (a drift, an offset, sag
@@ -219,6 +220,17 @@ class Motion:
         """Every arm that is out goes home."""
         for side in sorted(self.away):
             yield from self.go_home(side)
+
+    def retreat_open(self) -> Actions:
+        """Every arm that is out goes home, then opens its fingers as at reset and holds while
+        they come to rest: a hand left closed or half open at home would tell every later
+        moment from an earlier one without memory."""
+        moved = sorted(self.away)
+        yield from self.retreat()
+        for side in moved:
+            yield from self.gripper(side, OPEN)
+        if moved:
+            yield from self.hold(OPEN_SETTLE)
 
     def move_by(self, side: str, delta, yaw: float, speed: float = CARRY_SPEED) -> Actions:
         yield from self.move_to(side, self.site_pos(side) + np.asarray(delta), yaw, speed)

@@ -27,6 +27,8 @@ class RearrangeBlocksExpert(ScriptedExpert):
         yield from self.label(1, m.retreat())
         yield from self.label(1, m.press("left", task.button.top(task.model),
                                              count=lambda: task.button.count))
-        yield from self.label(2, m.go_home("left"))
+        # home with the fingers open, as before the press (v1 kept them closed: at home with
+        # both mats loaded, the closed hand told that the press was made)
+        yield from self.label(2, m.retreat_open())
         yield from self.label(2, move(returning, task.slots[1]))
         yield from self.label(2, m.hold(5))

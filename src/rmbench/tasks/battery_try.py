@@ -90,8 +90,13 @@ class BatteryTry(Task):
     aliasing_point = "after a failed try: the holder hides the cells' ends and the lamp is off"
     aliasing_stage = 3
     hidden_keys = ("correct",)
-    # at the frame each try is counted, where the planner chooses the next flip
-    aliasing_pair = (({"correct": (1, 1)}, 3, 0), ({"correct": (0, 1)}, 4, 0))
+    # at the frame each try is counted, where the planner chooses the next flip: the second
+    # count under two hidden orders (the headline), then within one episode the inserts'
+    # count against the first flip's and against the second flip's (both before a left flip:
+    # one goes on to the right battery, the other ends)
+    aliasing_pairs = ((({"correct": (1, 1)}, 3, 0), ({"correct": (0, 1)}, 4, 0)),
+                      (({"correct": (0, 1)}, 2, 0), ({"correct": (0, 1)}, 3, 0)),
+                      (({"correct": (0, 1)}, 2, 0), ({"correct": (0, 1)}, 4, 0)))
 
     # The state observation: the holder, the lamp, and the two identical cells left to right.
     # A cell's axis shows as cos/sin(2 yaw) (no polarity); which way its positive end points

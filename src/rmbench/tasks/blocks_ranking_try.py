@@ -96,8 +96,13 @@ class BlocksRankingTry(Task):
     aliasing_point = "after a red verdict: the row looks like any other wrong order"
     aliasing_stage = 1
     hidden_keys = ("initial_order", "target_order")
-    aliasing_pair = (({"initial_order": (0, 1, 2), "target_order": (2, 1, 0)}, 3, 1),
-                     ({"initial_order": (0, 2, 1), "target_order": (2, 1, 0)}, 1, 1))
+    # after a red verdict, the arm over the button: the same row reached by one swap and
+    # shown at the start (the headline), and reached by two swaps
+    aliasing_pairs = (
+        (({"initial_order": (0, 1, 2), "target_order": (2, 1, 0)}, 3, 1),
+         ({"initial_order": (0, 2, 1), "target_order": (2, 1, 0)}, 1, 1)),
+        (({"initial_order": (0, 1, 2), "target_order": (2, 1, 0)}, 5, 1),
+         ({"initial_order": (1, 2, 0), "target_order": (2, 1, 0)}, 1, 1)))
 
     # The state observation: the three cubes left to right, each with its colour (RGB), the
     # button and the lamp. The target order and the tries made are not in it.

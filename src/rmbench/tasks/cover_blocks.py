@@ -80,8 +80,12 @@ class CoverBlocks(Task):
     aliasing_point = "all three blocks covered: the colours are invisible"
     aliasing_stage = 3
     hidden_keys = ("colours",)
-    aliasing_pair = (({"colours": ("red", "green", "blue")}, 3, 1),
-                     ({"colours": ("blue", "red", "green")}, 3, 1))
+    # all three covered (the headline), and the left one uncovered with the other two still
+    # covered, where green lies in the middle or on the right
+    aliasing_pairs = ((({"colours": ("red", "green", "blue")}, 3, 1),
+                       ({"colours": ("blue", "red", "green")}, 3, 1)),
+                      (({"colours": ("red", "green", "blue")}, 4, 1),
+                       ({"colours": ("red", "blue", "green")}, 4, 1)))
 
     # The state observation: the three cubes left to right, each with a visibility flag and,
     # while it can be seen, its pose and colour (zero under a cover); the three identical

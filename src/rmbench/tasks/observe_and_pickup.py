@@ -76,7 +76,7 @@ class ObserveAndPickup(Task):
     aliasing_point = "after the screen rises: the same table whatever the reference was"
     aliasing_stage = 1
     hidden_keys = ("target",)
-    aliasing_pair = (({"target": 0}, 1, 1), ({"target": 3}, 1, 1))
+    aliasing_pairs = ((({"target": 0}, 1, 1), ({"target": 3}, 1, 1)),)
 
     # The state observation: each table object's pose and look (shape, colour), and the
     # reference's look while it can be seen (zero once the screen stands in front of it).

@@ -64,7 +64,11 @@ class PressButton(Task):
     aliasing_point = "between presses: a released button looks the same after any count"
     aliasing_stage = 1  # after the first press
     hidden_keys = ("d1", "d2")
-    aliasing_pair = (({"d1": 3, "d2": 2}, 2, 1), ({"d1": 3, "d2": 2}, 3, 1))
+    # the arm over a button between presses: the last left press against an earlier one (the
+    # headline), the first against the second, and the last middle press against the first
+    aliasing_pairs = ((({"d1": 3, "d2": 2}, 2, 1), ({"d1": 3, "d2": 2}, 3, 1)),
+                      (({"d1": 3, "d2": 2}, 1, 1), ({"d1": 3, "d2": 2}, 2, 1)),
+                      (({"d1": 3, "d2": 2}, 4, 1), ({"d1": 3, "d2": 2}, 5, 1)))
 
     # The state observation: the three buttons (left, middle, confirm) and the two tiles with
     # the digit each shows. Press counts are not in it: a released button shows none.

@@ -64,7 +64,7 @@ class PutBackBlock(Task):
     aliasing_point = "cube at the centre, around the press: the four mats look identical"
     aliasing_stage = 2  # the press has happened; the cube still sits at the centre
     hidden_keys = ("original_mat",)
-    aliasing_pair = (({"original_mat": "left"}, 2, 1), ({"original_mat": "front"}, 2, 1))
+    aliasing_pairs = ((({"original_mat": "left"}, 2, 1), ({"original_mat": "front"}, 2, 1)),)
 
     # The state observation (docs/reference/observations.md): the four mats, the button, the cube.
     state_names = (*(n for m in MAT_NAMES for n in S.xy_names(f"mat_{m}")),

@@ -48,7 +48,7 @@ MAT_SIDES = ("left", "right")
 @register
 class RearrangeBlocks(Task):
     name = "rearrange_blocks"
-    gym_id = "rmbench/RearrangeBlocks-v1"
+    gym_id = "rmbench/RearrangeBlocks-v2"
     tmc = "M(1)"
     step_limit = 700
     subtasks = ("move the middle block onto the empty mat", "press the button",
@@ -72,7 +72,10 @@ class RearrangeBlocks(Task):
     aliasing_point = "after the press: both blocks sit on identical mats"
     aliasing_stage = 2
     hidden_keys = ("loaded_mat",)
-    aliasing_pair = (({"loaded_mat": "left"}, 2, 1), ({"loaded_mat": "right"}, 2, 1))
+    # the mat the block started on (the headline), and the press: both arms home with both
+    # mats loaded, before it and after it (a released button shows no press)
+    aliasing_pairs = ((({"loaded_mat": "left"}, 2, 1), ({"loaded_mat": "right"}, 2, 1)),
+                      (({"loaded_mat": "left"}, 1, 2), ({"loaded_mat": "left"}, 2, 2)))
 
     # The state observation: the mats, the button, and the two identical cubes left to right
     # (a fixed order would tell the cube that started on a mat from the other).

@@ -32,8 +32,10 @@ def ordered() -> list[type[Task]]:
 
 
 # Records made before datasets, checkpoints and evaluations kept their task's gym id: the
-# version they were made on, where that is not the current one (CHANGELOG.md, 2026-11-28).
-UNRECORDED_VERSIONS = {"battery_try": "rmbench/BatteryTry-v1", "swap_blocks": "rmbench/SwapBlocks-v1"}
+# version they were made on, where that is not the current one (CHANGELOG.md, 2026-11-28 and
+# 2026-11-29).
+UNRECORDED_VERSIONS = {"battery_try": "rmbench/BatteryTry-v1", "swap_blocks": "rmbench/SwapBlocks-v1",
+                       "rearrange_blocks": "rmbench/RearrangeBlocks-v1"}
 
 
 def recorded_gym_id(task: str, record: dict) -> str:

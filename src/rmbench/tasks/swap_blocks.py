@@ -78,7 +78,12 @@ class SwapBlocks(Task):
     aliasing_point = "after any move: two full trays and an empty one, like a fresh start"
     aliasing_stage = 2
     hidden_keys = ("empty_tray",)
-    aliasing_pair = (({"empty_tray": 2}, 3, 2), ({"empty_tray": 2}, 0, 1))
+    # both arms home with two full trays and an empty one: after the last move against the
+    # start (the headline), and after the first and the second move against the start of
+    # the layout whose empty tray that is (roles: empty 2 -> the first cube in tray 1)
+    aliasing_pairs = ((({"empty_tray": 2}, 3, 2), ({"empty_tray": 2}, 0, 1)),
+                      (({"empty_tray": 2}, 1, 2), ({"empty_tray": 1}, 0, 1)),
+                      (({"empty_tray": 2}, 2, 2), ({"empty_tray": 0}, 0, 1)))
 
     # The state observation: the trays (left to right), the button, and the two identical
     # cubes left to right (a fixed order would tell the first cube from the second).

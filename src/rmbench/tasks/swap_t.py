@@ -61,7 +61,10 @@ class SwapT(Task):
     aliasing_point = "both T blocks held up: their starting poses are no longer visible"
     aliasing_stage = 2
     hidden_keys = ("yaws",)
-    aliasing_pair = (({"yaws": (0.5, -0.3)}, 2, 2), ({"yaws": (-0.6, 0.2)}, 2, 2))
+    # both Ts held (the headline), and the left T still held once the right one is down,
+    # where only the right T's starting yaw differs
+    aliasing_pairs = ((({"yaws": (0.5, -0.3)}, 2, 2), ({"yaws": (-0.6, 0.2)}, 2, 2)),
+                      (({"yaws": (0.5, -0.3)}, 3, 2), ({"yaws": (0.5, 0.2)}, 3, 2)))
 
     # The state observation: the red T and the blue T (their colours tell them apart).
     state_names = (*S.pose_names("t_red", 1), *S.pose_names("t_blue", 1))
