@@ -54,7 +54,7 @@ def main() -> None:
             continue
         for pair in range(len(cls.aliasing_pairs)):
             r = measure(cls.name, seed=args.seed, pair=pair)
-            rows.append({**r.to_dict(), "tmc": cls.tmc})
+            rows.append({**r.to_dict(), "tmc": cls.tmc, "gym_id": cls.gym_id})
             same = r.next_subtasks[0] == r.next_subtasks[1]
             nxt = f"same text ({r.next_subtasks[0]})" if same else " / ".join(r.next_subtasks)
             print(f"{r.task:<20} {pair:>4} {r.pixel_distance:>9.3f} {r.unrelated_distance:>13.3f} "
@@ -68,7 +68,7 @@ def main() -> None:
             if cls.name in more_kept:
                 more[cls.name] = more_kept[cls.name]
             continue
-        more[cls.name] = [measure(cls.name, seed=s, pair=pair).to_dict()
+        more[cls.name] = [{**measure(cls.name, seed=s, pair=pair).to_dict(), "gym_id": cls.gym_id}
                           for pair in range(len(cls.aliasing_pairs)) for s in seeds]
         print(f"{cls.name:<20} seeds {','.join(map(str, seeds))}, "
               f"{len(cls.aliasing_pairs)} pair(s): scene ratio up to "

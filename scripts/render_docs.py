@@ -876,7 +876,7 @@ def aliasing() -> str:
     """Every aliasing pair at the main seed: its moments, the pixel distances (whole frame and
     scene alone), the arms'."""
     d = load("aliasing.json")
-    rows = [[t["task"], t["tmc"], t.get("pair", 0), f"{t['steps'][0]} / {t['steps'][1]}",
+    rows = [[t["task"], t["tmc"], t["pair"], f"{t['steps'][0]} / {t['steps'][1]}",
              " / ".join(t["next_subtasks"]), f"{t['pixel_distance']:.3f}",
              f"{t['unrelated_distance']:.3f}", f"{t['ratio']:.3f}", f"{t['scene_ratio']:.3f}",
              f"{t['arm_gap']:.4f}", f"{t['gripper_gap']:.4f}"]
@@ -892,8 +892,8 @@ def aliasing_seeds() -> str:
     rows = []
     for t in ordered():
         runs = d.get("more_seeds", {}).get(t.name, [])
-        for pair in sorted({r.get("pair", 0) for r in runs}):
-            of = [r for r in runs if r.get("pair", 0) == pair]
+        for pair in sorted({r["pair"] for r in runs}):
+            of = [r for r in runs if r["pair"] == pair]
             differs = all(r["next_subtasks"][0] != r["next_subtasks"][1]
                           or r["action_divergence"] > 0.1 for r in of)
             rows.append([t.name, t.tmc, pair, ", ".join(str(r["seed"]) for r in of),

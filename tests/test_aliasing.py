@@ -3,7 +3,7 @@
 is what makes the benchmark's tasks memory tasks. The camera is compared on the scene (the
 robot's pixels left out) and the arms by their joints: a fraction of a degree between two
 moments moves the arms' edges by a pixel, which the whole frame counts (battery_try, after the
-inserts against after a flip: whole-frame ratio 0.53, the scene's 0.006, the arms 0.005 rad).
+inserts against after a flip: whole-frame ratio 0.53, the scene's 0.005, the arms 0.005 rad).
 
 The same holds for the state observation (``Task.environment_state``): at the two moments no
 flag, one-hot, colour, lamp or digit differs (what a cover, the screen or the holder hides is
@@ -34,9 +34,9 @@ moments have cubes in each other's places (blocks_ranking_try at 100000, swap_bl
 cubes show traded yaws (in the frames too), up to 0.4 rad apart. No frame tells a traded yaw
 from a drawn one, so the test bounds the core ratio.
 
-The arms' joints, which every policy reads, agree at the pair as well (largest difference over
-the twelve arm joints at most 0.005 rad, battery_try's). battery_try's pairs is the frame each
-try is counted at, where a planner chooses the next flip: the task counts a try only with both
+The arms' joints, which every policy reads, agree at the pairs as well (largest difference over
+the twelve arm joints at most 0.005 rad, battery_try's pairs 1 and 2). battery_try's pairs are
+the frames each try is counted at, where a planner chooses the next flip: the task counts a try only with both
 arms home and settled (battery_try-v3; v4 averages the arms over half a second, so that a try
 is counted under the collection's action noise too). Counted as the cell went in (v1), the arm that had set
 it down was still over its slot there; counted as its gripper came within 3 cm of home (v2),

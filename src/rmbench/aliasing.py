@@ -4,7 +4,7 @@ Every task names the pairs of moments its expert's plan revisits (``Task.aliasin
 the first its headline): each moment is a set of fixed hidden variables, a stage of the plan,
 and which expert segment start after reaching that stage.
 Run from the same seed, the two moments should look alike to the head camera while the
-expert's next subtask (or, where the text is the same, its next actions) differ. The pixel
+expert's next subtask (or, where the text is the same, its actions from there on) differ. The pixel
 distance is compared with the same moment in an unrelated seed. The distance between the two
 moments' state observations (``Task.environment_state``) is compared with the distance between
 the first frames of the two seeds: a state policy meets the same aliasing as a pixel policy,
@@ -40,7 +40,8 @@ class Moment:
     first_state: np.ndarray | None = None  # ... and at the episode's first frame
     joints: np.ndarray | None = None  # the arms' joint positions at the moment (agent_pos)
     robot: np.ndarray | None = None  # HxW bool: the frame's pixels that show the robot
-    first_frame: np.ndarray | None = None  # the episode's first frame, and its robot pixels
+    first_frame: np.ndarray | None = None  # the episode's first frame and its robot pixels
+    # (with ``first``: what the scene's distance between layouts is taken on)
     first_robot: np.ndarray | None = None
 
 
@@ -91,11 +92,13 @@ class AliasingResult:
 
 
 def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
-            width: int = 320, height: int = 240, render: bool = True) -> Moment:
+            width: int = 320, height: int = 240, render: bool = True,
+            first: bool = False) -> Moment:
     """Roll the expert from ``seed`` with ``hidden`` fixed until its ``segment``-th segment
     start after the env reached ``stage`` (``segment`` 0: the first frame at that stage, the
-    one a planner chooses the next step at); return the head frame (``render``) and the state
-    observation there, and what follows."""
+    one a planner chooses the next step at); return the head frame and its robot pixels
+    (``render``; ``first``: the episode's first frame too) and the state observation there,
+    and what follows."""
     env = make(task, render=False)
     try:
         expert = make_expert(env)
@@ -106,7 +109,7 @@ def capture(task: str, seed: int, hidden: dict, stage: int, segment: int,
         reached, seen, frame, step = info["subtask_step"] >= stage, 0, None, 0
         state, joints, found, robot = None, None, False, None
         first_frame = first_robot = None
-        if render:
+        if render and first:
             first_frame = env.unwrapped.sim.render(["head"], width, height)["head"]
             first_robot = robot_pixels(env.unwrapped.sim, "head", width, height)
         actions: list[np.ndarray] = []
@@ -188,8 +191,9 @@ def measure(task: str, seed: int = 100000, unrelated_seed: int | None = None,
                          f"not {pair}")
     moments = cls.aliasing_pairs[pair]
     unrelated_seed = seed + 1 if unrelated_seed is None else unrelated_seed
-    a, b = (capture(cls.name, seed, *m, render=pixels) for m in moments)
-    other = capture(cls.name, unrelated_seed, *moments[0], render=pixels)
+    a = capture(cls.name, seed, *moments[0], render=pixels, first=True)
+    b = capture(cls.name, seed, *moments[1], render=pixels)
+    other = capture(cls.name, unrelated_seed, *moments[0], render=pixels, first=True)
     if pixels:
         d, d_other = pixel_distance(a.frame, b.frame), pixel_distance(a.frame, other.frame)
         s = pixel_distance(a.frame, b.frame, ~(a.robot | b.robot))

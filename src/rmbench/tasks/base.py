@@ -76,10 +76,11 @@ class Task:
     # may fix: the layout is drawn from the seed as usual, only these values are replaced.
     # Two episodes that differ only there are how the aliasing tests show a task needs memory.
     hidden_keys: ClassVar[tuple[str, ...]] = ()
-    # Every pair of moments the expert's plan revisits: two moments that look alike but need
-    # different actions, each (hidden values, stage, n): the n-th expert segment start after
-    # the env reached that stage, or with n = 0 the first frame at that stage
-    # (rmbench.aliasing). The first pair is the task's headline (its pictures, the probe).
+    # Every pair of moments the expert's plan revisits: two moments that look alike while the
+    # expert's next subtask, or its actions from there on, differ (the same next press with a
+    # different count after it), each (hidden values, stage, n): the n-th expert segment start
+    # after the env reached that stage, or with n = 0 the first frame at that stage
+    # (rmbench.aliasing). The first pair is the task's headline (docs/tasks/<task>.png).
     aliasing_pairs: ClassVar[tuple[tuple[tuple[dict, int, int], tuple[dict, int, int]], ...]]
     # The state observation: names of ``environment_state()``'s entries, in order (see
     # rmbench.tasks.state for the shared encodings and docs/reference/observations.md).

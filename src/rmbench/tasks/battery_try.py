@@ -91,9 +91,9 @@ class BatteryTry(Task):
     aliasing_stage = 3
     hidden_keys = ("correct",)
     # at the frame each try is counted, where the planner chooses the next flip: the second
-    # count under two hidden orders (the headline), then within one episode the inserts'
-    # count against the first flip's and against the second flip's (both before a left flip:
-    # one goes on to the right battery, the other ends)
+    # count of one hidden order against the third of another (the headline), then within one
+    # episode the inserts' count against the first flip's, and against the second flip's
+    # (both before a left flip: after it one goes on to the right battery, the other ends)
     aliasing_pairs = ((({"correct": (1, 1)}, 3, 0), ({"correct": (0, 1)}, 4, 0)),
                       (({"correct": (0, 1)}, 2, 0), ({"correct": (0, 1)}, 3, 0)),
                       (({"correct": (0, 1)}, 2, 0), ({"correct": (0, 1)}, 4, 0)))

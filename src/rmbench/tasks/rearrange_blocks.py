@@ -18,7 +18,9 @@ Failure: a second press; a press before both blocks were on the mats; the wrong 
 to the middle slot after the press; a block off the table.
 
 Memory: TMC M(1). Aliasing point: right after the press both blocks sit on mats and look
-alike; only the first frames tell which one started there.
+alike; only the first frames tell which one started there. The press leaves no trace either:
+with both arms home and both mats loaded, the moment before it and the moment after it look
+alike (v2's expert reopens the pressing hand at home), so only memory tells whether it was made.
 """
 
 from __future__ import annotations
