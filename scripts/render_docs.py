@@ -275,7 +275,7 @@ def _memory_gap(res: dict, task: str) -> list[str]:
         return ["—"]
     ra, rb = Rate.of(a), Rate.of(b)
     d, low, high = difference(ra.successes, ra.episodes, rb.successes, rb.episodes)
-    return [format_difference(100 * d, 100 * low, 100 * high) + (" *" if low > 0 or high < 0 else "")]
+    return [format_difference(d, low, high) + ("*" if low > 0 or high < 0 else "")]
 
 
 def pixels_policies() -> str:
