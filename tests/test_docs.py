@@ -128,3 +128,15 @@ def test_every_record_keeps_its_wall_conditions_as_fields():
             assert sum(timed) <= r["train_wall_s"] + 1e-6, where
             if all(p["wall_s"] for p in train if p["steps"][0] >= start):
                 assert sum(timed) == pytest.approx(r["train_wall_s"]), where
+
+
+def test_the_camera_tables_memory_gap_is_in_points():
+    """Mem-0 minus ``no_memory`` in the camera table: points with their interval (the rates'
+    difference once scaled, not twice: +6700 for 67 points was printed)."""
+    render_docs = _render_docs()
+    def cell(k):
+        return {"successes": k, "episodes": 100, "success_rate": k / 100}
+
+    res = {"cells": {"put_back_block": {"mem0": cell(67), "mem0:no_memory": cell(0)}}}
+    assert render_docs._memory_gap(res, "put_back_block") == ["+67 [+57, +75]*"]
+    assert render_docs._memory_gap(res, "swap_T") == ["—"]
