@@ -166,14 +166,10 @@ def _footnote(table: str, lead: str = "", marks: str | None = None) -> str:
                      f"format `{FORMAT}`, where a subtask repeated back to back was one subtask "
                      "(CHANGELOG.md, 2026-11-27); not re-run on the current data yet.")
     if "‡" in marks:
-        notes.append(f"{lead.format(mark='‡') + ' run' if lead else '‡'} on an earlier version of the task "
-                     "(CHANGELOG.md, 2026-11-28: battery_try-v1 counted a try while the arm "
-                     "that made it was still over the holder, v2 while it still turned its "
-                     "wrist back home, v3 never under the collection's action noise, so its "
-                     "datasets held one subtask; swap_blocks-v1 left a hand half open, which "
-                     "told a later moment from the first; 2026-11-29: rearrange_blocks-v1 "
-                     "went home from the press with the hand closed, which told whether the "
-                     "press was made); not re-run on the current version yet.")
+        notes.append(f"{lead.format(mark='‡') + ' run' if lead else '‡'} on an earlier version of "
+                     "the task than the one the tasks table names (what each version changed, "
+                     "and why results before it are not mixed with those after: CHANGELOG.md); "
+                     "not re-run on the current version yet.")
     return "".join(f"\n{n}\n" for n in notes)
 
 

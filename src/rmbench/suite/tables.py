@@ -44,14 +44,13 @@ def results(plan: Plan, out: Path, command: str = "",
     cells = {task: {base: pooled_row(rows) for base, rows in columns.items()}
              for task, columns in seeds.items()}
     timing = {t: read_json(Path(out) / t / TIMING, {}) for t in cells}
-    collect = {t: timing[t].get("collect_wall_s") for t in cells}
     data = {t: {k: timing[t][k] for k in DATA_WALLS if timing[t].get(k) is not None}
             for t in cells}
     levels = {t: asdict(chance(t)) for t in cells}
     return {"command": command, "plan": plan.to_dict(), "cells": cells, "chance": levels,
             "differences": differences(cells), "failed": failed or {},
             "wall_s": {"table": read_json(Path(out) / TIMING, {}).get("table_wall_s"),
-                       "collect": collect, "data": data},
+                       "data": data},
             "machine": describe()}
 
 
