@@ -303,6 +303,20 @@ def validation_probes() -> str:
                      "endings"], rows)
 
 
+def observe_grasps() -> str:
+    """Where observe_and_pickup's first grasp closes (benchmarks/observe_grasps.py)."""
+    path = RESULTS / "observe_grasps.json"
+    rows = []
+    for r in (json.loads(path.read_text())["rows"] if path.exists() else []):
+        shares = [format_rate(r[k]["count"], r[k]["of"])
+                  for k in ("success", "on_object", "on_target", "target_side_arm")]
+        rows.append([r["label"], *shares, f"{100 * r['median_nearest_m']:.1f}",
+                     f"{100 * r['median_target_m']:.1f}"])
+    return markdown(["policy", "success", "first grasp on an object", "on the target",
+                     "with the target side's arm", "median cm to the nearest object",
+                     "median cm to the target"], rows)
+
+
 def pixels_cost() -> str:
     """Each measured row's cost: its data stages (shared by its cells) and each cell's
     training and evaluation, in core-hours as measured (one thread or worker each)."""
@@ -1014,7 +1028,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "readme-results": readme_results, "state-policies": state_policies,
     "pixels-policies": pixels_policies, "pixels-ablations": pixels_ablations,
     "pixels-cost": pixels_cost, "pixels-failures": pixels_failures,
-    "validation-probes": validation_probes,
+    "validation-probes": validation_probes, "observe-grasps": observe_grasps,
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds, "state-failures": state_failures,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,
