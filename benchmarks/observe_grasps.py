@@ -7,9 +7,10 @@ object at all, on which one, and with the arm of the target's side.
         [--episodes 100] [--seed 0] [--out benchmarks/results/observe_grasps.json]
 
 SPEC is a policy spec as ``rmbench eval --policy`` takes it (``expert``, ``mem0:CKPT``, ...).
-Each episode is one of ``--seed``'s expert-verified validation episodes (the recipe choices' split, from
-``100000 * (1 + seed) + 50000``), played until it ends. The first grasp is the first step after
-the observe phase at which a gripper's command falls below half open; at that step the
+Each episode is one of ``--seed``'s expert-verified validation episodes (the split recipe
+choices read, from ``100000 * (1 + seed) + 50000``), played until it ends; a policy's chunk is
+played out step by step. The first grasp is the first step after the observe phase at which
+a gripper's command falls below half open; at that step the
 closing hand's position is held against each object's (horizontal distance). "On an object"
 means within ``NEAR`` of its centre. A row per policy, with Wilson 95% intervals for the
 rates, is written atomically to the JSON (a label given again replaces its row).
@@ -45,9 +46,12 @@ def first_grasp(env, policy, seed: int) -> dict:
     policy.reset(info["instruction"], info)
     task, sim = env.unwrapped.task, env.unwrapped.sim
     target = task.objects[task.target]
-    grasp, ended = None, "timeout"
+    grasp, chunk = None, []
     while True:
-        action = policy.act(obs)
+        if not chunk:
+            out = np.asarray(policy.act(obs), np.float64)
+            chunk = list(out) if out.ndim == 2 else [out]
+        action = chunk.pop(0)
         closing = [k for k, i in enumerate(GRIPPERS) if action[i] < OPEN]
         if grasp is None and closing and task.screen_up:
             side = closing[0]  # the left hand first where both close at once
