@@ -167,7 +167,7 @@ def _footnote(table: str, lead: str = "", marks: str | None = None) -> str:
                      "(CHANGELOG.md, 2026-11-27); not re-run on the current data yet.")
     if "‡" in marks:
         notes.append(f"{lead.format(mark='‡') + ' run' if lead else '‡'} on an earlier version of "
-                     "the task than the one the tasks table names (what each version changed, "
+                     "the task than the one the README's tasks table names (what each version changed, "
                      "and why results before it are not mixed with those after: CHANGELOG.md); "
                      "not re-run on the current version yet.")
     return "".join(f"\n{n}\n" for n in notes)
@@ -310,11 +310,12 @@ def observe_grasps() -> str:
     for r in (json.loads(path.read_text())["rows"] if path.exists() else []):
         shares = [format_rate(r[k]["count"], r[k]["of"])
                   for k in ("success", "on_object", "on_target", "target_side_arm")]
-        rows.append([r["label"], *shares, f"{100 * r['median_nearest_m']:.1f}",
-                     f"{100 * r['median_target_m']:.1f}"])
+        cm = [("—" if r.get(k) is None else f"{100 * r[k]:.1f}")
+              for k in ("median_nearest_m", "median_target_m", "median_height_m")]
+        rows.append([r["label"], *shares, *cm])
     return markdown(["policy", "success", "first grasp on an object", "on the target",
                      "with the target side's arm", "median cm to the nearest object",
-                     "median cm to the target"], rows)
+                     "median cm to the target", "median cm over the table"], rows)
 
 
 def pixels_cost() -> str:

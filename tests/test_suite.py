@@ -512,7 +512,7 @@ def test_tables_give_each_rate_its_interval_and_mem0_its_differences():
     assert not diffs["mem0:no_anchor"]["outside_noise"] and diffs["mem0:no_anchor"]["ci95"][0] < 0
     res = {"plan": plan.to_dict(), "cells": cells, "differences": tables.differences(cells),
            "chance": {"put_back_block": asdict(chance("put_back_block"))}, "failed": {},
-           "wall_s": {"table": None, "collect": {}}, "machine": describe()}
+           "wall_s": {"table": None, "data": {}}, "machine": describe()}
     text = tables.markdown(res)
     assert "| put_back_block | M(1) | 85.0 [77, 91] | 80.0 [71, 87] | 7.0 [3, 14] | — |" in text
     # the paper's ablations table beside them, task by task (eval/published.json)
