@@ -9,11 +9,13 @@ object at all, on which one, and with the arm of the target's side.
 SPEC is a policy spec as ``rmbench eval --policy`` takes it (``expert``, ``mem0:CKPT``, ...).
 Each episode is one of ``--seed``'s expert-verified validation episodes (the split recipe
 choices read, from ``100000 * (1 + seed) + 50000``), played until it ends; a policy's chunk is
-played out step by step. The first grasp is the first step after the observe phase at which
-a gripper's command falls below half open; at that step the
-closing hand's position is held against each object's (horizontal distance). "On an object"
-means within ``NEAR`` of its centre. A row per policy, with Wilson 95% intervals for the
-rates, is written atomically to the JSON (a label given again replaces its row).
+played out step by step, and the policy is told what the evaluation tells it (never the
+task's hidden entries). The first grasp is the first step after the observe phase at which a
+gripper's command goes from at least half open to below it; at that step the closing hand's
+grasp site is held against each object's centre: the horizontal distance, and the site's
+height over the table top. "On an object" means horizontally within ``NEAR`` of its centre.
+A row per policy, with Wilson 95% intervals for the rates, is written atomically to the JSON
+(a label given again replaces its row).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from rmbench.eval.intervals import wilson
 from rmbench.eval.seeds import verified_seeds
 from rmbench.policies.registry import env_options, make_policy
 from rmbench.sim import robot
+from rmbench.sim.station import TABLE_TOP
 from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "observe_grasps.json"
@@ -43,29 +46,23 @@ GRIPPERS = (6, 13)  # the action's gripper entries, left then right (robot.SIDES
 def first_grasp(env, policy, seed: int) -> dict:
     """Play one episode; where its first grasp closed, and how the episode ended."""
     obs, info = env.reset(seed=seed)
-    policy.reset(info["instruction"], info)
-    task, sim = env.unwrapped.task, env.unwrapped.sim
+    u = env.unwrapped
+    # what the evaluation hands a policy (eval/episode.py): never the task's hidden entries
+    policy.reset(info["instruction"], {**u.spec_info, "seed": seed,
+                                       "instruction": info["instruction"]})
+    task, sim = u.task, u.sim
     target = task.objects[task.target]
-    grasp, chunk = None, []
+    grasp, chunk, was_open = None, [], [True, True]
     while True:
         if not chunk:
             out = np.asarray(policy.act(obs), np.float64)
             chunk = list(out) if out.ndim == 2 else [out]
         action = chunk.pop(0)
-        closing = [k for k, i in enumerate(GRIPPERS) if action[i] < OPEN]
+        is_open = [bool(action[i] >= OPEN) for i in GRIPPERS]
+        closing = [k for k in range(2) if was_open[k] and not is_open[k]]
+        was_open = is_open
         if grasp is None and closing and task.screen_up:
-            side = closing[0]  # the left hand first where both close at once
-            hand = sim.ee_pose(sim.data)[7 * side: 7 * side + 2]
-            dist = [float(np.linalg.norm(sim.data.xpos[o.body_id][:2] - hand))
-                    for o in task.objects]
-            nearest = int(np.argmin(dist))
-            target_side = 0 if sim.data.xpos[target.body_id][0] < 0 else 1
-            grasp = {"step": int(info.get("step", 0)),
-                     "arm": robot.SIDES[side], "target_side_arm": side == target_side,
-                     "nearest": nearest, "nearest_m": round(dist[nearest], 4),
-                     "target_m": round(dist[task.target], 4),
-                     "on_target": nearest == task.target and dist[nearest] < NEAR,
-                     "on_object": dist[nearest] < NEAR}
+            grasp = _grasp(sim, task, target, closing)
         obs, _, terminated, truncated, info = env.step(action)
         if terminated or truncated:
             ended = ("success" if info["is_success"] else
@@ -74,10 +71,33 @@ def first_grasp(env, policy, seed: int) -> dict:
     return {"seed": seed, "ended": ended, "grasp": grasp}
 
 
+def _grasp(sim, task, target, closing: list[int]) -> dict:
+    """Where the closing hand (of ``closing``, the one nearer an object where both close at
+    once) stands against the objects: horizontal distances, and its height over the table."""
+    pose = sim.ee_pose(sim.data)
+    objects = np.array([sim.data.xpos[o.body_id][:2] for o in task.objects])
+
+    def distances(side: int) -> np.ndarray:
+        return np.linalg.norm(objects - pose[7 * side: 7 * side + 2], axis=1)
+
+    side = min(closing, key=lambda k: distances(k).min())
+    dist = distances(side)
+    nearest = int(np.argmin(dist))
+    target_side = 0 if sim.data.xpos[target.body_id][0] < 0 else 1  # the expert's rule
+    return {"arm": robot.SIDES[side], "both_closed": len(closing) == 2,
+            "target_side_arm": side == target_side,
+            "nearest": nearest, "nearest_m": round(float(dist[nearest]), 4),
+            "target_m": round(float(dist[task.target]), 4),
+            "height_m": round(float(pose[7 * side + 2] - TABLE_TOP), 4),
+            "on_target": bool(nearest == task.target and dist[nearest] < NEAR),
+            "on_object": bool(dist[nearest] < NEAR)}
+
+
 def rate(k: int, n: int) -> dict:
+    if not n:
+        return {"count": 0, "of": 0, "rate": None, "ci95": None}
     lo, hi = wilson(k, n)
-    return {"count": k, "of": n, "rate": round(k / n, 4) if n else None,
-            "ci95": [round(lo, 4), round(hi, 4)]}
+    return {"count": k, "of": n, "rate": round(k / n, 4), "ci95": [round(lo, 4), round(hi, 4)]}
 
 
 def summarize(label: str, spec: str, episodes: list[dict], seed: int, wall_s: float) -> dict:
@@ -94,6 +114,8 @@ def summarize(label: str, spec: str, episodes: list[dict], seed: int, wall_s: fl
         "median_nearest_m": (round(float(np.median([g["nearest_m"] for g in grasps])), 4)
                              if grasps else None),
         "median_target_m": (round(float(np.median([g["target_m"] for g in grasps])), 4)
+                            if grasps else None),
+        "median_height_m": (round(float(np.median([g["height_m"] for g in grasps])), 4)
                             if grasps else None),
         "wall_s": round(wall_s, 1), "per_episode": episodes,
     }
