@@ -318,6 +318,23 @@ def observe_grasps() -> str:
                      "median cm to the target", "median cm over the table"], rows)
 
 
+def put_back_loops() -> str:
+    """Put-back loops in evaluation records (benchmarks/put_back_loops.py)."""
+    path = RESULTS / "put_back_loops.json"
+    rows = []
+    for r in (json.loads(path.read_text())["rows"] if path.exists() else []):
+        def part(c: dict) -> str:
+            return format_rate(c["count"], c["of"]) + f" ({c['count']} of {c['of']})"
+        by = r["looped_by_ending"]
+        rows.append([r["task"], r["label"], r["split"], part(r["looped"]),
+                     part(by["timeout"]) if "timeout" in by else "—",
+                     part(by["success"]) if "success" in by else "—",
+                     "; ".join(f"{s} {n}" for s, n in r["failed_looping_mostly_in"].items())])
+    return markdown(["task", "checkpoint", "episodes", "episodes that loop", "of the timeouts",
+                     "of the successes", "failed loops, by the stage most of their put-backs "
+                     "were in"], rows)
+
+
 def pixels_cost() -> str:
     """Each measured row's cost: its data stages (shared by its cells) and each cell's
     training and evaluation, in core-hours as measured (one thread or worker each)."""
@@ -1030,6 +1047,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "pixels-policies": pixels_policies, "pixels-ablations": pixels_ablations,
     "pixels-cost": pixels_cost, "pixels-failures": pixels_failures,
     "validation-probes": validation_probes, "observe-grasps": observe_grasps,
+    "put-back-loops": put_back_loops,
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds, "state-failures": state_failures,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,

@@ -1,0 +1,108 @@
+"""Put-back loops in an evaluation's records: how often a piece was lifted from its place and
+put back into the same place, episode by episode, read from the task's place predicates (those
+named ``*<suffix>``, the place's index or -1 while the piece is in none). swap_blocks' cells
+mostly time out; this says whether they time out moving, or going round in a loop that
+takes a cube out of its tray and puts it back where it was.
+
+    .venv/bin/python benchmarks/put_back_loops.py --run LABEL=FOLDER [--run ...]
+        [--suffix _tray] [--loop 2] [--out benchmarks/results/put_back_loops.json]
+
+FOLDER is an ``rmbench eval`` folder of one task (its records, ``TASK/episodes.jsonl``). An
+episode loops where it holds at least ``--loop`` put-backs. A row per run, with Wilson 95%
+intervals, is written atomically to the JSON (a label given again replaces its row).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+from rmbench.eval.endings import ending, stage_at_end
+from rmbench.eval.harness import read_records
+from rmbench.eval.intervals import wilson
+from rmbench.video import write_atomic
+
+OUT = Path(__file__).resolve().parent / "results" / "put_back_loops.json"
+NONE = -1  # a place predicate's value while the piece is in no place (held, or between)
+
+
+def put_backs(record: dict[str, Any], suffix: str) -> Counter:
+    """{stage: put-backs} of one episode: each time a piece's place predicate went from a
+    place to none and then back to that same place, counted in the plan's stage it came back
+    in."""
+    last: dict[str, int] = {}
+    left: dict[str, int] = {}
+    stage, out = "", Counter()
+    for _, source, key, value in record.get("events", []):
+        if source != "task":
+            continue
+        if key == "subtask":
+            stage = value
+        if not key.endswith(suffix):
+            continue
+        before = last.get(key)
+        if value == NONE and before is not None and before != NONE:
+            left[key] = before
+        elif value != NONE and before == NONE and left.get(key) == value:
+            out[stage] += 1
+        last[key] = value
+    return out
+
+
+def share(k: int, n: int) -> dict:
+    lo, hi = wilson(k, n) if n else (0.0, 0.0)
+    return {"count": k, "of": n, "ci95": [round(lo, 4), round(hi, 4)] if n else None}
+
+
+def run_row(label: str, folder: Path, suffix: str, loop: int) -> dict:
+    run = json.loads((folder / "run.json").read_text())
+    (task,) = [p.name for p in folder.iterdir() if (p / "episodes.jsonl").exists()]
+    records = read_records(folder / task / "episodes.jsonl")
+    if not records:
+        raise SystemExit(f"{folder}: no episode records")
+    per = [(r, put_backs(r, suffix)) for r in records]
+    looped = [(r, c) for r, c in per if sum(c.values()) >= loop]
+    endings = Counter("success" if r["success"] else ending(r) for r, _ in per)
+    looped_endings = Counter("success" if r["success"] else ending(r) for r, _ in looped)
+    failed_looping = [(r, c) for r, c in looped if not r["success"]]
+    return {
+        "label": label, "task": task, "policy": run["policy"], "seed": run["seed"],
+        "split": run.get("split", "test"), "episodes": len(records), "suffix": suffix,
+        "loop": loop, "endings": dict(endings.most_common()),
+        "looped": share(len(looped), len(records)),
+        "looped_by_ending": {k: share(looped_endings.get(k, 0), n) for k, n in endings.items()},
+        # where the failed looping episodes ended, and where most of their put-backs were
+        "failed_looping_ended_in": dict(Counter(stage_at_end(r) for r, _ in failed_looping)
+                                        .most_common()),
+        "failed_looping_mostly_in": dict(Counter(c.most_common(1)[0][0]
+                                                 for _, c in failed_looping).most_common()),
+        "put_backs_per_episode": [sum(c.values()) for _, c in per],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--run", action="append", required=True, metavar="LABEL=FOLDER")
+    p.add_argument("--suffix", default="_tray")
+    p.add_argument("--loop", type=int, default=2)
+    p.add_argument("--out", type=Path, default=OUT)
+    args = p.parse_args(argv)
+    rows = json.loads(args.out.read_text())["rows"] if args.out.exists() else []
+    for item in args.run:
+        label, sep, folder = item.rpartition("=")
+        if not sep or not label:
+            p.error(f"--run takes LABEL=FOLDER, got {item!r}")
+        row = run_row(label, Path(folder), args.suffix, args.loop)
+        rows = [r for r in rows if r["label"] != label] + [row]
+        t = row["looped_by_ending"].get("timeout")
+        print(f"{label}: {row['looped']['count']} of {row['episodes']} episodes loop"
+              + (f"; {t['count']} of {t['of']} timeouts" if t else ""))
+    write_atomic(args.out, (json.dumps({"rows": rows}, indent=1) + "\n").encode())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
