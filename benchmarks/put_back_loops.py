@@ -1,8 +1,10 @@
-"""Put-back loops in an evaluation's records: how often a piece was lifted from its place and
-put back into the same place, episode by episode, read from the task's place predicates (those
-named ``*<suffix>``, the place's index or -1 while the piece is in none). swap_blocks' cells
-mostly time out; this says whether they time out moving, or going round in a loop that
-takes a cube out of its tray and puts it back where it was.
+"""Put-back loops in an evaluation's records: how often a piece left its place and came back to
+the same place, episode by episode, read from the task's place predicates (those named
+``*<suffix>``: the place's index, or -1 while the piece is in none; swap_blocks' cube is in
+none while a finger touches it or it is off every tray). swap_blocks' cells mostly time out;
+this says whether they time out moving, or taking hold of a cube and letting it go in its own
+tray, again and again. How long each put-back kept the piece out of place is set beside how
+long each move did.
 
     .venv/bin/python benchmarks/put_back_loops.py --run LABEL=FOLDER [--run ...]
         [--suffix _tray] [--loop 2] [--out benchmarks/results/put_back_loops.json]
@@ -20,6 +22,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from rmbench.eval.endings import ending, stage_at_end
 from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
@@ -29,14 +33,14 @@ OUT = Path(__file__).resolve().parent / "results" / "put_back_loops.json"
 NONE = -1  # a place predicate's value while the piece is in no place (held, or between)
 
 
-def put_backs(record: dict[str, Any], suffix: str) -> Counter:
-    """{stage: put-backs} of one episode: each time a piece's place predicate went from a
-    place to none and then back to that same place, counted in the plan's stage it came back
-    in."""
+def put_backs(record: dict[str, Any], suffix: str) -> tuple[Counter, list[int], list[int]]:
+    """One episode's put-backs: {stage: count}, each time a piece's place predicate went from a
+    place to none and then back to that same place (counted in the plan's stage it came back
+    in); and the steps each put-back and each move (back in another place) was out of place."""
     last: dict[str, int] = {}
-    left: dict[str, int] = {}
-    stage, out = "", Counter()
-    for _, source, key, value in record.get("events", []):
+    left: dict[str, tuple[int, int]] = {}  # predicate -> (place it left, step it left)
+    stage, out, back, moved = "", Counter(), [], []
+    for step, source, key, value in record.get("events", []):
         if source != "task":
             continue
         if key == "subtask":
@@ -45,11 +49,16 @@ def put_backs(record: dict[str, Any], suffix: str) -> Counter:
             continue
         before = last.get(key)
         if value == NONE and before is not None and before != NONE:
-            left[key] = before
-        elif value != NONE and before == NONE and left.get(key) == value:
-            out[stage] += 1
+            left[key] = (before, step)
+        elif value != NONE and before == NONE and key in left:
+            place, since = left.pop(key)
+            if place == value:
+                out[stage] += 1
+                back.append(step - since)
+            else:
+                moved.append(step - since)
         last[key] = value
-    return out
+    return out, back, moved
 
 
 def share(k: int, n: int) -> dict:
@@ -63,7 +72,10 @@ def run_row(label: str, folder: Path, suffix: str, loop: int) -> dict:
     records = read_records(folder / task / "episodes.jsonl")
     if not records:
         raise SystemExit(f"{folder}: no episode records")
-    per = [(r, put_backs(r, suffix)) for r in records]
+    found = [(r, *put_backs(r, suffix)) for r in records]
+    per = [(r, c) for r, c, _, _ in found]
+    back = [n for _, _, b, _ in found for n in b]
+    moved = [n for _, _, _, m in found for n in m]
     looped = [(r, c) for r, c in per if sum(c.values()) >= loop]
     endings = Counter("success" if r["success"] else ending(r) for r, _ in per)
     looped_endings = Counter("success" if r["success"] else ending(r) for r, _ in looped)
@@ -80,6 +92,10 @@ def run_row(label: str, folder: Path, suffix: str, loop: int) -> dict:
         "failed_looping_mostly_in": dict(Counter(c.most_common(1)[0][0]
                                                  for _, c in failed_looping).most_common()),
         "put_backs_per_episode": [sum(c.values()) for _, c in per],
+        # how long a piece was out of place: a put-back against a move to another place
+        "put_back_steps_median": float(np.median(back)) if back else None,
+        "put_backs_within_10_steps": share(sum(n <= 10 for n in back), len(back)),
+        "move_steps_median": float(np.median(moved)) if moved else None,
     }
 
 

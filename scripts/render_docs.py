@@ -329,10 +329,12 @@ def put_back_loops() -> str:
         rows.append([r["task"], r["label"], r["split"], part(r["looped"]),
                      part(by["timeout"]) if "timeout" in by else "—",
                      part(by["success"]) if "success" in by else "—",
+                     f"{r['put_back_steps_median']:.0f} against {r['move_steps_median']:.0f}",
                      "; ".join(f"{s} {n}" for s, n in r["failed_looping_mostly_in"].items())])
     return markdown(["task", "checkpoint", "episodes", "episodes that loop", "of the timeouts",
-                     "of the successes", "failed loops, by the stage most of their put-backs "
-                     "were in"], rows)
+                     "of the successes", "steps out of its tray: put-back against move "
+                     "(medians)", "failed loops, by the stage most of their put-backs were in"],
+                    rows)
 
 
 def pixels_cost() -> str:
