@@ -21,7 +21,6 @@ A row per policy, with Wilson 95% intervals for the rates, is written atomically
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -29,12 +28,12 @@ import numpy as np
 
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.envs.registration import make
-from rmbench.eval.intervals import wilson
+from rmbench.eval.intervals import share
+from rmbench.eval.rows import put_row
 from rmbench.eval.seeds import verified_seeds
 from rmbench.policies.registry import env_options, make_policy
 from rmbench.sim import robot
 from rmbench.sim.station import TABLE_TOP
-from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "observe_grasps.json"
 TASK = "observe_and_pickup"
@@ -93,24 +92,17 @@ def _grasp(sim, task, target, closing: list[int]) -> dict:
             "on_object": bool(dist[nearest] < NEAR)}
 
 
-def rate(k: int, n: int) -> dict:
-    if not n:
-        return {"count": 0, "of": 0, "rate": None, "ci95": None}
-    lo, hi = wilson(k, n)
-    return {"count": k, "of": n, "rate": round(k / n, 4), "ci95": [round(lo, 4), round(hi, 4)]}
-
-
 def summarize(label: str, spec: str, episodes: list[dict], seed: int, wall_s: float) -> dict:
     grasps = [e["grasp"] for e in episodes if e["grasp"] is not None]
     n = len(episodes)
     return {
         "label": label, "policy": spec, "task": TASK, "split": "validation", "seed": seed,
         "episodes": n, "near_m": NEAR,
-        "success": rate(sum(e["ended"] == "success" for e in episodes), n),
-        "grasped": rate(len(grasps), n),
-        "on_object": rate(sum(g["on_object"] for g in grasps), n),
-        "on_target": rate(sum(g["on_target"] for g in grasps), n),
-        "target_side_arm": rate(sum(g["target_side_arm"] for g in grasps), n),
+        "success": share(sum(e["ended"] == "success" for e in episodes), n),
+        "grasped": share(len(grasps), n),
+        "on_object": share(sum(g["on_object"] for g in grasps), n),
+        "on_target": share(sum(g["on_target"] for g in grasps), n),
+        "target_side_arm": share(sum(g["target_side_arm"] for g in grasps), n),
         "median_nearest_m": (round(float(np.median([g["nearest_m"] for g in grasps])), 4)
                              if grasps else None),
         "median_target_m": (round(float(np.median([g["target_m"] for g in grasps])), 4)
@@ -129,7 +121,6 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
     seeds = verified_seeds(TASK, args.seed, args.episodes, split="validation")
-    rows = json.loads(args.out.read_text())["rows"] if args.out.exists() else []
     for item in args.policy:
         label, _, spec = item.partition("=")
         if not spec:
@@ -140,8 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         episodes = [first_grasp(env, policy, s) for s in seeds]
         row = summarize(label, spec, episodes, args.seed, time.perf_counter() - t0)
         env.close()
-        rows = [r for r in rows if r["label"] != label] + [row]
-        write_atomic(args.out, (json.dumps({"rows": rows}, indent=1) + "\n").encode())
+        put_row(args.out, row, key=("label",))
         print(f"{label}: success {row['success']['count']}/{row['episodes']}, first grasp on an "
               f"object {row['on_object']['count']}, on the target {row['on_target']['count']}, "
               f"with the target side's arm {row['target_side_arm']['count']}; median distance "

@@ -1,13 +1,13 @@
 """Put-back loops in an evaluation's records: how often a piece left its place and came back to
-the same place, episode by episode, read from the task's place predicates (those named
-``*<suffix>``: the place's index, or -1 while the piece is in none; swap_blocks' cube is in
-none while a finger touches it or it is off every tray). swap_blocks' cells mostly time out;
+the same place, episode by episode, read from the predicates the task declares as places
+(``Task.place_predicates``: the place's index, or -1 while the piece is in none; swap_blocks'
+cube is in none while a finger touches it or it is off every tray). swap_blocks' cells mostly time out;
 this says whether they time out moving, or taking hold of a cube and letting it go in its own
 tray, again and again. How long each put-back kept the piece out of place is set beside how
 long each move did.
 
     .venv/bin/python benchmarks/put_back_loops.py --run LABEL=FOLDER [--run ...]
-        [--suffix _tray] [--loop 2] [--out benchmarks/results/put_back_loops.json]
+        [--loop 2] [--out benchmarks/results/put_back_loops.json]
 
 FOLDER is an ``rmbench eval`` folder of one task (its records, ``TASK/episodes.jsonl``). An
 episode loops where it holds at least ``--loop`` put-backs. A row per run, with Wilson 95%
@@ -26,14 +26,15 @@ import numpy as np
 
 from rmbench.eval.endings import ending, stage_at_end
 from rmbench.eval.harness import read_records
-from rmbench.eval.intervals import wilson
-from rmbench.video import write_atomic
+from rmbench.eval.intervals import share
+from rmbench.eval.rows import put_row
+from rmbench.tasks import get_task
 
 OUT = Path(__file__).resolve().parent / "results" / "put_back_loops.json"
 NONE = -1  # a place predicate's value while the piece is in no place (held, or between)
 
 
-def put_backs(record: dict[str, Any], suffix: str) -> tuple[Counter, list[int], list[int]]:
+def put_backs(record: dict[str, Any], places: tuple[str, ...]) -> tuple[Counter, list[int], list[int]]:
     """One episode's put-backs: {stage: count}, each time a piece's place predicate went from a
     place to none and then back to that same place (counted in the plan's stage it came back
     in); and the steps each put-back and each move (back in another place) was out of place."""
@@ -45,7 +46,7 @@ def put_backs(record: dict[str, Any], suffix: str) -> tuple[Counter, list[int], 
             continue
         if key == "subtask":
             stage = value
-        if not key.endswith(suffix):
+        if key not in places:
             continue
         before = last.get(key)
         if value == NONE and before is not None and before != NONE:
@@ -61,18 +62,16 @@ def put_backs(record: dict[str, Any], suffix: str) -> tuple[Counter, list[int], 
     return out, back, moved
 
 
-def share(k: int, n: int) -> dict:
-    lo, hi = wilson(k, n) if n else (0.0, 0.0)
-    return {"count": k, "of": n, "ci95": [round(lo, 4), round(hi, 4)] if n else None}
-
-
-def run_row(label: str, folder: Path, suffix: str, loop: int) -> dict:
+def run_row(label: str, folder: Path, loop: int) -> dict:
     run = json.loads((folder / "run.json").read_text())
     (task,) = [p.name for p in folder.iterdir() if (p / "episodes.jsonl").exists()]
     records = read_records(folder / task / "episodes.jsonl")
     if not records:
         raise SystemExit(f"{folder}: no episode records")
-    found = [(r, *put_backs(r, suffix)) for r in records]
+    places = get_task(task).place_predicates
+    if not places:
+        raise SystemExit(f"{folder}: {task} declares no place predicates to read put-backs from")
+    found = [(r, *put_backs(r, places)) for r in records]
     per = [(r, c) for r, c, _, _ in found]
     back = [n for _, _, b, _ in found for n in b]
     moved = [n for _, _, _, m in found for n in m]
@@ -82,7 +81,7 @@ def run_row(label: str, folder: Path, suffix: str, loop: int) -> dict:
     failed_looping = [(r, c) for r, c in looped if not r["success"]]
     return {
         "label": label, "task": task, "policy": run["policy"], "seed": run["seed"],
-        "split": run.get("split", "test"), "episodes": len(records), "suffix": suffix,
+        "split": run.get("split", "test"), "episodes": len(records), "places": list(places),
         "loop": loop, "endings": dict(endings.most_common()),
         "looped": share(len(looped), len(records)),
         "looped_by_ending": {k: share(looped_endings.get(k, 0), n) for k, n in endings.items()},
@@ -102,21 +101,18 @@ def run_row(label: str, folder: Path, suffix: str, loop: int) -> dict:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--run", action="append", required=True, metavar="LABEL=FOLDER")
-    p.add_argument("--suffix", default="_tray")
     p.add_argument("--loop", type=int, default=2)
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
-    rows = json.loads(args.out.read_text())["rows"] if args.out.exists() else []
     for item in args.run:
         label, sep, folder = item.rpartition("=")
         if not sep or not label:
             p.error(f"--run takes LABEL=FOLDER, got {item!r}")
-        row = run_row(label, Path(folder), args.suffix, args.loop)
-        rows = [r for r in rows if r["label"] != label] + [row]
+        row = run_row(label, Path(folder), args.loop)
+        put_row(args.out, row, key=("label",))
         t = row["looped_by_ending"].get("timeout")
         print(f"{label}: {row['looped']['count']} of {row['episodes']} episodes loop"
               + (f"; {t['count']} of {t['of']} timeouts" if t else ""))
-    write_atomic(args.out, (json.dumps({"rows": rows}, indent=1) + "\n").encode())
     return 0
 
 

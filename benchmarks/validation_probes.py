@@ -20,7 +20,7 @@ from pathlib import Path
 
 from rmbench.eval.endings import failures_by_stage
 from rmbench.eval.harness import read_records
-from rmbench.video import write_atomic
+from rmbench.eval.rows import put_row
 
 OUT = Path(__file__).resolve().parent / "results" / "validation_probes.json"
 
@@ -57,7 +57,6 @@ def main(argv: list[str] | None = None) -> int:
                         "changes the training (kept in their rows as trained_by)")
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
-    doc = json.loads(args.out.read_text()) if args.out.exists() else {"probes": []}
     for item in args.probe:
         change, sep, folder = item.rpartition("=")
         if not sep or not change.strip():
@@ -65,10 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         row = probe_row(change.strip(), Path(folder))
         if args.trained_by:
             row["trained_by"] = args.trained_by
-        key = (row["task"], row["policy"], row["change"])
-        doc["probes"] = [r for r in doc["probes"]
-                         if (r["task"], r["policy"], r["change"]) != key] + [row]
-    write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
+        put_row(args.out, row, key=("task", "policy", "change"), field="probes")
     print(f"wrote {args.out}")
     return 0
 

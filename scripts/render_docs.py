@@ -303,13 +303,20 @@ def validation_probes() -> str:
                      "endings"], rows)
 
 
+def share_text(c: dict) -> str:
+    """A stored share ({count, of, ...}, rmbench.eval.intervals.share): '43 [34, 53] (43 of
+    100)', or '—' where there was nothing to count."""
+    if not c["of"]:
+        return "—"
+    return format_rate(c["count"], c["of"]) + f" ({c['count']} of {c['of']})"
+
+
 def observe_grasps() -> str:
     """Where observe_and_pickup's first grasp closes (benchmarks/observe_grasps.py)."""
     path = RESULTS / "observe_grasps.json"
     rows = []
     for r in (json.loads(path.read_text())["rows"] if path.exists() else []):
-        shares = [format_rate(r[k]["count"], r[k]["of"])
-                  for k in ("success", "on_object", "on_target", "target_side_arm")]
+        shares = [share_text(r[k]) for k in ("success", "on_object", "on_target", "target_side_arm")]
         cm = [("—" if r.get(k) is None else f"{100 * r[k]:.1f}")
               for k in ("median_nearest_m", "median_target_m", "median_height_m")]
         rows.append([r["label"], *shares, *cm])
@@ -323,12 +330,10 @@ def put_back_loops() -> str:
     path = RESULTS / "put_back_loops.json"
     rows = []
     for r in (json.loads(path.read_text())["rows"] if path.exists() else []):
-        def part(c: dict) -> str:
-            return format_rate(c["count"], c["of"]) + f" ({c['count']} of {c['of']})"
         by = r["looped_by_ending"]
-        rows.append([r["task"], r["label"], r["split"], part(r["looped"]),
-                     part(by["timeout"]) if "timeout" in by else "—",
-                     part(by["success"]) if "success" in by else "—",
+        rows.append([r["task"], r["label"], r["split"], share_text(r["looped"]),
+                     share_text(by["timeout"]) if "timeout" in by else "—",
+                     share_text(by["success"]) if "success" in by else "—",
                      f"{r['put_back_steps_median']:.0f} against {r['move_steps_median']:.0f}",
                      "; ".join(f"{s} {n}" for s, n in r["failed_looping_mostly_in"].items())])
     return markdown(["task", "checkpoint", "episodes", "episodes that loop", "of the timeouts",

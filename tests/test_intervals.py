@@ -51,3 +51,12 @@ def test_a_difference_that_rounds_to_zero_prints_no_sign():
     assert signed(-0.04, 1) == "0.0" and signed(-0.05001, 1) == "-0.1" and signed(0.4) == "0"
     # press_button's Mem-0 (136/200) minus gt_classifier (154/200): an upper end of -0.24 points
     assert format_difference(*difference(136, 200, 154, 200)) == "-9 [-18, 0]"
+
+
+def test_a_share_stores_its_rate_and_interval_and_nothing_where_nothing_was_counted():
+    from rmbench.eval.intervals import share
+
+    s = share(43, 100)
+    assert (s["count"], s["of"], s["rate"]) == (43, 100, 0.43)
+    assert s["ci95"] == [round(x, 4) for x in wilson(43, 100)]
+    assert share(0, 0) == {"count": 0, "of": 0, "rate": None, "ci95": None}

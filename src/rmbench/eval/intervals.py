@@ -9,6 +9,7 @@ comparison of two cells carries the interval of their difference.
 - ``difference``: Newcombe's hybrid score interval (method 10) for the difference of two
   independent rates, built from the two Wilson intervals.
 - ``format_difference``: a difference and its interval in points, as the docs print them.
+- ``share``: a count out of a total as results files store it, with its interval.
 """
 
 from __future__ import annotations
@@ -32,6 +33,16 @@ def wilson(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
     low = 0.0 if successes == 0 else max(0.0, centre - half)
     high = 1.0 if successes == n else min(1.0, centre + half)
     return low, high
+
+
+def share(count: int, of: int) -> dict:
+    """{count, of, rate, ci95}: a count out of a total as the results files store it, the rate
+    and its Wilson interval as fractions (both None where there is nothing to count)."""
+    if not of:
+        return {"count": count, "of": of, "rate": None, "ci95": None}
+    low, high = wilson(count, of)
+    return {"count": count, "of": of, "rate": round(count / of, 4),
+            "ci95": [round(low, 4), round(high, 4)]}
 
 
 def difference(k1: int, n1: int, k2: int, n2: int, z: float = Z95) -> tuple[float, float, float]:

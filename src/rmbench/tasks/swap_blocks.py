@@ -78,6 +78,7 @@ class SwapBlocks(Task):
     aliasing_point = "after any move: two full trays and an empty one, like a fresh start"
     aliasing_stage = 2
     hidden_keys = ("empty_tray",)
+    place_predicates = ("first_cube_tray", "second_cube_tray")
     # both arms home with two full trays and an empty one: after the last move against the
     # start (the headline), and after the first and the second move against the start of
     # the layout whose empty tray that is (roles: empty 2 -> the first cube in tray 1)
