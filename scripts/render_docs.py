@@ -331,9 +331,9 @@ def put_back_loops() -> str:
     rows = []
     for r in (json.loads(path.read_text())["rows"] if path.exists() else []):
         by = r["looped_by_ending"]
+        nothing = {"count": 0, "of": 0}  # no episode ended so: share_text's '—'
         rows.append([r["task"], r["label"], r["split"], share_text(r["looped"]),
-                     share_text(by["timeout"]) if "timeout" in by else "—",
-                     share_text(by["success"]) if "success" in by else "—",
+                     share_text(by.get("timeout", nothing)), share_text(by.get("success", nothing)),
                      f"{r['put_back_steps_median']:.0f} against {r['move_steps_median']:.0f}",
                      "; ".join(f"{s} {n}" for s, n in r["failed_looping_mostly_in"].items())])
     return markdown(["task", "checkpoint", "episodes", "episodes that loop", "of the timeouts",
