@@ -19,11 +19,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 
 import rmbench  # noqa: F401  (GL backend before mujoco)
 from rmbench.aliasing import measure
+from rmbench.files import write_json
 from rmbench.tasks.registry import ordered
 
 
@@ -75,11 +75,8 @@ def main() -> None:
               f"{max(r['scene_ratio'] for r in more[cls.name]):.3f}, state (core) up to "
               f"{max(r['state_ratio_core'] for r in more[cls.name]):.3f}, arms up to "
               f"{max(r['arm_gap'] for r in more[cls.name]):.4f}", flush=True)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(f".tmp{os.getpid()}")
-    tmp.write_text(json.dumps({"seed": args.seed, "camera": "head 320x240", "tasks": rows,
-                              "more_seeds": more}, indent=2))
-    os.replace(tmp, out)
+    write_json(out, {"seed": args.seed, "camera": "head 320x240", "tasks": rows,
+                     "more_seeds": more}, indent=2)
     print(f"\nwrote {out}")
 
 

@@ -14,15 +14,14 @@ two sides alternate round after round; each side's figure is its least disturbed
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
 import torch
 
+from rmbench.files import write_json
 from rmbench.machine import describe
 from rmbench.policies.nn.efficientnet import FoldedLite0, load_pretrained
-from rmbench.video import write_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
 STRIDE, SIZE = 16, (96, 128)
@@ -65,7 +64,7 @@ def main() -> None:
               "speedup": {f"batch{b}": round(best["network"][b] / best["folded"][b], 3)
                           for b in (8, 1)},
               "max_abs_difference": gap, "max_abs_feature": scale, "machine": describe()}
-    write_atomic(args.out, (json.dumps(report, indent=2) + "\n").encode())
+    write_json(args.out, report, indent=2)
     for b in (8, 1):
         print(f"batch {b}: network {best['network'][b]:.2f} ms/frame, folded "
               f"{best['folded'][b]:.2f} ({report['speedup'][f'batch{b}']:.2f}x)")

@@ -13,7 +13,6 @@ benchmarks/results/collect_speed.json).
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import tempfile
 import time
@@ -24,6 +23,7 @@ from rmbench.data import CollectConfig, collect
 from rmbench.data.record import run_expert
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
+from rmbench.files import write_json
 from rmbench.machine import describe
 
 
@@ -98,7 +98,7 @@ def main() -> None:
               f"{r.get('mb_per_demo', float('nan')):>8.3f}")
     print(f"50 demos with {args.workers} workers: {result['time_for_50_demos_s']:.0f} s")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    write_json(args.out, result, indent=2)
     print(f"wrote {args.out}")
 
 

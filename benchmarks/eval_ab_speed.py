@@ -29,8 +29,8 @@ from pathlib import Path
 from train_speed import ROOT, run, worktree
 
 from rmbench.eval.intervals import wilson
+from rmbench.files import write_json
 from rmbench.machine import describe
-from rmbench.video import write_atomic
 
 PYTHON = Path(sys.executable)
 # One side's evaluation, run under that side's rmbench: its CPU time around evaluate() and
@@ -128,7 +128,7 @@ def main() -> None:
         "records_identical": records["base"] == records["this"],
         "machine": describe(),
     }
-    write_atomic(args.out, (json.dumps(report, indent=2) + "\n").encode())
+    write_json(args.out, report, indent=2)
     print(f"| side | commit | batch | CPU s (best of {args.rounds}) | success |\n|---|---|---|---|---|")
     for name in sides:
         s = report[name]

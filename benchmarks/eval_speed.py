@@ -25,6 +25,7 @@ import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.envs.registration import make
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.harness import read_records
+from rmbench.files import write_json
 from rmbench.machine import describe
 from rmbench.seeds import eval_seed_start
 from rmbench.tasks.registry import ordered
@@ -111,7 +112,7 @@ def main() -> None:
               f"{r['steps_per_s']:>8.1f} {r['episodes_per_hour']:>10.1f}")
     print(f"harness / bare env: {ratio:.3f}x")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    write_json(args.out, result, indent=2)
     print(f"wrote {args.out}")
 
 

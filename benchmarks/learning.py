@@ -43,7 +43,6 @@ episodes ended, failure reasons counted), training and evaluation wall times and
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shlex
 import sys
@@ -51,11 +50,11 @@ from pathlib import Path
 
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.eval.episode import ENDINGS
+from rmbench.files import write_json
 from rmbench.machine import describe
 from rmbench.suite import runner, stages
 from rmbench.suite.plan import Plan, add_recipe_arguments, recipe_of
 from rmbench.tasks import get_task
-from rmbench.video import write_atomic
 
 ROOT = Path(__file__).resolve().parent
 POLICIES = ("mem0", "mem0:no_memory", "mem0:no_anchor", "mem0:no_sliding", "dp", "act")
@@ -122,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
               "machine": {**describe(), "jobs": args.jobs,
                           "torch_threads": max(1, (os.cpu_count() or 1) // args.jobs)}}
     results_path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(results_path, (json.dumps(result, indent=1) + "\n").encode())
+    write_json(results_path, result)
     print(table(rows))
     print(f"wrote {results_path}")
     return 0

@@ -23,8 +23,8 @@ from pathlib import Path
 
 from rmbench.eval.intervals import difference, format_difference, outside_noise, wilson
 from rmbench.eval.report import Rate
+from rmbench.files import write_json
 from rmbench.machine import describe
-from rmbench.video import write_atomic
 
 
 def reference_cell(path: Path, task: str, cell: str) -> dict:
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
                                        "outside_noise": outside_noise(k, n, ref["successes"],
                                                                       ref["episodes"])},
               "machine": describe()}
-    write_atomic(Path(args.out), (json.dumps(result, indent=1) + "\n").encode())
+    write_json(Path(args.out), result)
     w, r = probe["without"], probe["with"]
     print(f"{args.task}: {w['successes']}/{n} without the probe, {r['successes']}/{n} with it "
           f"(drop {format_difference(probe['drop'], *probe['drop_ci95'], digits=1)}); "

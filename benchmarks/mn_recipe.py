@@ -23,9 +23,9 @@ import argparse
 import json
 from pathlib import Path
 
+from rmbench.files import write_json
 from rmbench.suite.records import cell_record, evaluation_rows
 from rmbench.suite.tables import differences
-from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "mn_recipe.json"
 
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
              # Mem-0 minus each other column, with Newcombe's 95% interval
              "differences": differences(cells)}
     doc["candidates"] = [c for c in doc["candidates"] if c["name"] != args.name] + [entry]
-    write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
+    write_json(args.out, doc)
     print(f"wrote {args.out}")
     return 0
 

@@ -13,17 +13,16 @@ decisions right and the episodes whose every decision is right.
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import replace
 from pathlib import Path
 
 import torch
 
 from rmbench.data.reader import Dataset
+from rmbench.files import write_json
 from rmbench.policies.mem0.agent import load_mem0
 from rmbench.policies.mem0.planner import DONE, planner_examples
 from rmbench.policies.mem0.train import planner_batch, planner_frames
-from rmbench.video import write_atomic
 
 DELAYS = (0, 2, 4, 6, 8, 10, 12)
 
@@ -67,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"episodes all right {r['episodes_all_right']}/{r['episodes']}")
     doc = {"task": ds.task, "dataset": args.dataset, "episodes": ds.num_episodes,
            "note": args.note, "checkpoints": rows}
-    write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
+    write_json(args.out, doc)
     print(f"wrote {args.out}")
     return 0
 

@@ -20,8 +20,8 @@ from pathlib import Path
 import torch
 from safetensors.torch import load_file
 
+from rmbench.files import write_json
 from rmbench.training.loop import CURVE_CSV, STATE
-from rmbench.video import write_atomic
 
 OUT = Path(__file__).resolve().parent / "results" / "planner_refit_check.json"
 
@@ -47,7 +47,7 @@ def main(argv: list[str] | None = None) -> int:
                  "planner_tensors_equal": int(same), "loss_rows": rows,
                  "loss_rows_equal": identical, "full": str(args.full),
                  "original": str(args.original), "refit": str(args.refit)}
-    write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
+    write_json(args.out, doc)
     print(json.dumps(doc[args.refit.name]))
     return 0 if names and rows > 0 and same == len(names) and identical else 1
 

@@ -35,7 +35,7 @@ import torch
 import rmbench
 from rmbench.data import layout as L
 from rmbench.data.torch_dataset import resize
-from rmbench.data.writer import write_json
+from rmbench.files import write_json
 from rmbench.policies.act.agent import ACTPolicy
 from rmbench.policies.act.config import ACTConfig
 from rmbench.policies.act.modeling import ACTModel, ACTTrainer
@@ -204,7 +204,7 @@ def backbone_case(task, frames, args) -> dict:
               f"{r['inputs_ms']:>7.1f} ms"
               f"{r['mem0']['step_ms']:>9.1f} ms{r['dp']['step_ms']:>7.1f} ms"
               f"{r['act']['step_ms']:>7.1f} ms{r['encode_frames_per_s']:>8.0f} fr/s")
-    write_json(args.out or OUT_BACKBONE, result)
+    write_json(args.out or OUT_BACKBONE, result, indent=2)
     print(f"wrote {args.out or OUT_BACKBONE}")
     return result
 
@@ -300,7 +300,7 @@ def main() -> None:
     print(f"Mem-0 planner call with 8 keys: {results['mem0']['planner_ms']:.1f} ms (target < 100); "
           f"memory store {results['mem0']['memory_store_floats']} floats (fixed size); "
           f"executor target >= 20 Hz")
-    write_json(args.out or OUT, result)
+    write_json(args.out or OUT, result, indent=2)
     print(f"wrote {args.out or OUT}")
 
 

@@ -23,9 +23,9 @@ import time
 from pathlib import Path
 
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
+from rmbench.files import write_json
 from rmbench.robustness import sweep
 from rmbench.tasks.registry import get_task, ordered, recorded_gym_id
-from rmbench.video import write_atomic
 
 ROOT = Path(__file__).resolve().parent
 CELLS = ROOT / "results" / "robustness"
@@ -48,7 +48,7 @@ def run_cell(task: str, kind: str, sigma: float, episodes: int, seed: int, worke
     cell["command"] = (f"rmbench robustness {task} --kind {kind} --noise {sigma:g} "
                        f"--episodes {episodes} --seed {seed}"
                        + (f" --tau {tau:g}" if kind == "smooth" else ""))
-    write_atomic(cell_path(task, kind, sigma), json.dumps(cell, indent=1).encode())
+    write_json(cell_path(task, kind, sigma), cell)
     return cell
 
 

@@ -9,13 +9,13 @@ Prints a table and writes JSON (default benchmarks/results/sim_speed.json).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 from pathlib import Path
 
 import rmbench  # before anything imports mujoco: it picks the OpenGL backend
 from rmbench.experts import make_expert
+from rmbench.files import write_json
 from rmbench.machine import describe
 from rmbench.sim.simulator import data_renderer
 
@@ -98,7 +98,7 @@ def main() -> None:
         print(f"  {name:<{width}}  {value}")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2))
+    write_json(out, result, indent=2)
     print(f"wrote {out}")
 
 

@@ -45,6 +45,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from rmbench.eval.chance import chance
+from rmbench.files import write_json
 from rmbench.suite.plan import split_seed, with_seed
 from rmbench.suite.records import (
     cell_record,
@@ -55,7 +56,6 @@ from rmbench.suite.records import (
 )
 from rmbench.suite.stages import pooled_row
 from rmbench.tasks.registry import recorded_gym_id
-from rmbench.video import write_atomic
 
 RESULTS = Path(__file__).resolve().parent / "results"
 OUT = RESULTS / "table_state.json"
@@ -212,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
                  args.seed, {k: getattr(args, k) for k in (
                      "machine", "jobs_beside", "beside", "threads", "workers", "note", "train_note")})
-    write_atomic(args.out, (json.dumps(doc, indent=1) + "\n").encode())
+    write_json(args.out, doc)
     print(f"wrote {args.out}")
     return 0
 

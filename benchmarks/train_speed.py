@@ -25,9 +25,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+from rmbench.files import write_json
 from rmbench.machine import describe
 from rmbench.suite.plan import RECIPES, sets_for
-from rmbench.video import write_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
 PYTHON = Path(sys.executable)
@@ -137,7 +137,7 @@ def main() -> None:
         "curves": curves_agree(curves["base"], curves["this"]),
         "machine": describe(),
     }
-    write_atomic(args.out, (json.dumps(report, indent=2) + "\n").encode())
+    write_json(args.out, report, indent=2)
     print(f"| side | commit | CPU ms/step (best of {args.rounds}) |\n|---|---|---|")
     for side in sides:
         print(f"| {side} | {report[side]['commit'][:10]} | {ms[side]:.1f} |")

@@ -30,12 +30,12 @@ from rmbench.eval.chance import chance
 from rmbench.eval.endings import failure_kind
 from rmbench.eval.intervals import difference, format_difference, format_rate
 from rmbench.eval.report import PUBLISHED, Rate, published_source
+from rmbench.files import write_atomic
 from rmbench.suite.plan import applies
 from rmbench.suite.records import reads_subtask_cut, seed_records
 from rmbench.suite.tables import difference_table, differences
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered, recorded_gym_id
-from rmbench.video import write_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"

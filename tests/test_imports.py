@@ -20,8 +20,8 @@ ROOT = "rmbench"
 # the name under rmbench (rmbench.<name>...); the rmbench package itself, the public facade,
 # is left out.
 LAYERS: list[set[str]] = [
-    # utilities that import no other rmbench module, but for parallel's check of the source
-    {"identity", "seeds", "video", "source", "parallel", "machine"},
+    # utilities: they import only each other (video writes through files, parallel checks the source)
+    {"files", "identity", "seeds", "video", "source", "parallel", "machine"},
     {"sim"},  # MuJoCo station, robot, objects, rendering backend
     {"tasks"},  # task definitions over the simulator
     {"envs", "experts"},  # the gymnasium env, and the scripted experts beside it

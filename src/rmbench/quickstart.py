@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import json
-import os
 import time
 from pathlib import Path
 
+from rmbench.files import write_json
 from rmbench.rollout import run_expert
 from rmbench.tasks.registry import ordered
 
@@ -32,9 +31,7 @@ def quickstart(out: str | Path = "runs/quickstart", episodes: int = 3, seed: int
                 f"mean steps {row['mean_steps']:>6}/{cls.step_limit}  video {row['video']}")
     summary = {"tasks": rows, "wall_s": round(time.perf_counter() - t0, 1),
                "all_succeeded": all(r["successes"] == r["episodes"] for r in rows)}
-    tmp = out / f".summary.json.{os.getpid()}"
-    tmp.write_text(json.dumps(summary, indent=2))
-    os.replace(tmp, out / "summary.json")
+    write_json(out / "summary.json", summary, indent=2)
     if log:
         log(f"\n{len(rows)} tasks in {summary['wall_s']} s; summary: {out / 'summary.json'}")
     return summary

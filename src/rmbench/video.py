@@ -1,19 +1,20 @@
 """MP4 I/O with PyAV: H.264 (libx264, yuv420p) encoding in memory, atomic files, decoding.
 
 Dataset videos and episode videos share one encoder. Encoding goes to memory first so that a
-file appears on disk only complete (written to a temporary name and renamed into place), and so
+file appears on disk only complete (``rmbench.files.write_atomic``), and so
 that worker processes can hand finished videos to the process that owns the dataset.
 """
 
 from __future__ import annotations
 
 import io
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import av
 import numpy as np
+
+from rmbench.files import write_atomic
 
 
 @dataclass(frozen=True)
@@ -93,19 +94,6 @@ class Mp4Encoder:
         self._container.close()
         self._container = None
         return self._buf.getvalue()
-
-
-def write_atomic(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so that readers see the old file or the whole new one."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 class VideoWriter:

@@ -47,11 +47,11 @@ import numpy as np
 
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset, Episode
+from rmbench.files import write_atomic
 from rmbench.parallel import in_order, make_executor
 from rmbench.sim import robot
 from rmbench.sim.kinematics import GraspKinematics, natural_yaw
 from rmbench.sim.station import HOME_ARM
-from rmbench.video import write_atomic
 
 REST_RADIUS = 0.05  # m: within this of its rest position a grasp site is not shifted
 MAX_MISS = 0.003  # m: a solved pose farther than this from its shifted target drops the copy

@@ -5,7 +5,6 @@ decode video again."""
 from __future__ import annotations
 
 import itertools
-import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from torch.utils.data import Sampler
 
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset
+from rmbench.files import atomic_path
 
 
 class FrameCache:
@@ -69,10 +69,8 @@ def cache_file(directory: Path, dataset: Dataset, episode: int, camera: str) -> 
 
 def save_atomic(path: Path, array: np.ndarray) -> None:
     """np.save under a temporary name, then renamed into place: readers never see half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npy")
-    np.save(tmp, array)
-    os.replace(tmp, path)
+    with atomic_path(path, suffix=".npy") as tmp:
+        np.save(tmp, array)
 
 
 def resize(frames: np.ndarray, size: tuple[int, int]) -> np.ndarray:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import re
 import shutil
 from pathlib import Path
@@ -25,9 +24,9 @@ import pyarrow.parquet as pq
 from rmbench.data import layout as L
 from rmbench.data.record import EpisodeRecord
 from rmbench.data.stats import aggregate, array_stats, pop_stats, to_json
+from rmbench.files import atomic_path, write_atomic, write_json
 from rmbench.identity import differences
 from rmbench.tasks import get_task
-from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -36,18 +35,9 @@ class DatasetError(ValueError):
     """A dataset that cannot be written or read as asked; the message names the problem."""
 
 
-def write_json(path: Path, obj: Any) -> None:
-    write_atomic(path, (json.dumps(obj, indent=2) + "\n").encode())
-
-
 def write_parquet(path: Path, table: pa.Table) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with atomic_path(path) as tmp:
         pq.write_table(table, tmp, compression="snappy")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def vector_column(x: np.ndarray) -> pa.Array:
@@ -217,13 +207,13 @@ class DatasetWriter:
         subtasks = pd.DataFrame({"subtask_index": np.arange(len(self.task.subtasks), dtype=np.int64)},
                                 index=pd.Index(list(self.task.subtasks), name="subtask"))
         write_parquet(self.root / L.SUBTASKS, pa.Table.from_pandas(subtasks))
-        write_json(self.root / L.STATS, to_json(aggregate(self._stats)))
+        write_json(self.root / L.STATS, to_json(aggregate(self._stats)), indent=2)
         write_json(self.root / L.RMBENCH, {
             "format": L.FORMAT, "task": self.task.name, "gym_id": self.task.gym_id,
             "tmc": self.task.tmc, "step_limit": self.task.step_limit,
             "subtasks": list(self.task.subtasks), "collection": self.collection,
-            "episodes": n, "skipped": self.skipped})
-        write_json(self.root / L.INFO, info)  # last: a reader sees counts that match the files
+            "episodes": n, "skipped": self.skipped}, indent=2)
+        write_json(self.root / L.INFO, info, indent=2)  # last: a reader sees counts that match the files
 
     # ----------------------------------------------------------------- resume
     def _resume(self) -> None:

@@ -34,13 +34,13 @@ from rmbench.eval.intervals import format_difference, wilson
 from rmbench.eval.probe import MemoryReset, arm_file, arm_name, compare
 from rmbench.eval.seeds import verified_seeds
 from rmbench.eval.worker import close_worker, episodes_job, policy_batches
+from rmbench.files import write_atomic, write_json
 from rmbench.identity import differences
 from rmbench.parallel import BACKENDS, in_order, make_executor
 from rmbench.policies.registry import parse_spec
 from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
-from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -171,7 +171,7 @@ def _check_identity(out: Path, cfg: EvalConfig) -> None:
             raise EvalError(f"{out} holds an evaluation with other arguments ({what}); use "
                             f"another --out")
     else:
-        write_atomic(path, (json.dumps(cfg.identity(), indent=2) + "\n").encode())
+        write_json(path, cfg.identity(), indent=2)
 
 
 def evaluate(cfg: EvalConfig) -> dict[str, Any]:
@@ -183,7 +183,7 @@ def evaluate(cfg: EvalConfig) -> dict[str, Any]:
         results[task] = _evaluate_task(cfg, task, out / task)
     summary = {"policy": cfg.policy, "seed": cfg.seed, "instructions": cfg.instructions,
                "tasks": {t: r.__dict__ for t, r in results.items()}}
-    write_atomic(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
+    write_json(out / "summary.json", summary, indent=2)
     write_atomic(out / "summary.md", summary_markdown(summary).encode())
     return summary
 
@@ -206,7 +206,7 @@ def _check_version(folder: Path, task: str) -> None:
         raise EvalError(f"{folder} holds episodes of {saved}, this rmbench's {task} is "
                         f"{gym_id} (CHANGELOG.md); use another --out")
     if not path.exists():
-        write_atomic(path, (json.dumps({"gym_id": gym_id}) + "\n").encode())
+        write_json(path, {"gym_id": gym_id}, indent=None)
 
 
 def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:

@@ -20,8 +20,8 @@ from rmbench.eval import published as _published
 from rmbench.eval.chance import chance
 from rmbench.eval.harness import drop_text, rate_text, read_records
 from rmbench.eval.intervals import wilson
+from rmbench.files import write_atomic
 from rmbench.tasks.registry import ordered
-from rmbench.video import write_atomic
 
 # Success rates (%) of the paper's main results table, per policy and task (eval/published.py)
 PUBLISHED_ROLLOUTS = _published.rollouts()

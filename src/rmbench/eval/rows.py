@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from rmbench.video import write_atomic
+from rmbench.files import write_json
 
 
 def put_row(path: Path, row: dict[str, Any], key: tuple[str, ...], field: str = "rows") -> list[dict]:
@@ -29,5 +29,5 @@ def put_row(path: Path, row: dict[str, Any], key: tuple[str, ...], field: str = 
             raise ValueError(f"{path}: not a results file of {field!r} rows ({err})") from None
     which = tuple(row[k] for k in key)
     doc[field] = [r for r in doc[field] if tuple(r.get(k) for k in key) != which] + [row]
-    write_atomic(path, (json.dumps(doc, indent=1) + "\n").encode())
+    write_json(path, doc)
     return doc[field]

@@ -19,10 +19,10 @@ from pathlib import Path
 from tqdm import tqdm
 
 from rmbench.eval.worker import close_worker, episode_job
+from rmbench.files import write_json
 from rmbench.parallel import Inline
 from rmbench.seeds import SPLIT_STRIDE, eval_seed_start
 from rmbench.tasks import get_task
-from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +76,7 @@ def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = Non
             else:
                 log.info("%s: evaluation seed %d rejected (%s)", cls.name, c, record["reason"])
                 state["rejected"].append({"seed": c, "reason": record["reason"]})
-            write_atomic(path, (json.dumps(state, indent=1) + "\n").encode())
+            write_json(path, state)
     finally:
         bar.close()
         if own:

@@ -18,8 +18,8 @@ from safetensors import SafetensorError
 from safetensors.torch import load as load_bytes
 from safetensors.torch import save as save_bytes
 
+from rmbench.files import write_atomic, write_json
 from rmbench.tasks.registry import recorded_gym_id
-from rmbench.video import write_atomic
 
 FORMAT = 1
 WEIGHTS, CONFIG = "model.safetensors", "config.json"
@@ -34,8 +34,7 @@ def save_checkpoint(folder: str | Path, model: torch.nn.Module, config: dict[str
     folder = Path(folder)
     state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
     write_atomic(folder / WEIGHTS, save_bytes(state, metadata={"step": str(step)}))
-    write_atomic(folder / CONFIG,
-                 (json.dumps({**config, "format": FORMAT, "step": step}, indent=2) + "\n").encode())
+    write_json(folder / CONFIG, {**config, "format": FORMAT, "step": step}, indent=2)
 
 
 def read_config(folder: str | Path, policy: str | None = None) -> dict[str, Any]:

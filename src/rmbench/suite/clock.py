@@ -9,8 +9,8 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from rmbench.files import write_json
 from rmbench.machine import describe
-from rmbench.video import write_atomic
 
 TIMING = "timing.json"
 # a task's data stages, shared by its cells (the pixel track's rendered copies and cached
@@ -64,4 +64,4 @@ def add_time(folder: Path, key: str, seconds: float) -> None:
     if here not in machines:
         machines.append(here)
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(path, (json.dumps(timing, indent=1) + "\n").encode())
+    write_json(path, timing)

@@ -9,7 +9,6 @@ every piece up to its last save."""
 
 from __future__ import annotations
 
-import json
 import time
 from collections import Counter
 from pathlib import Path
@@ -22,6 +21,7 @@ from rmbench.envs.noise import NoiseSpec
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
+from rmbench.files import write_json
 from rmbench.suite.clock import DATA_WALLS, TIMING, add_time, read_json, timed
 from rmbench.suite.plan import (
     COLLECT_CAMERAS,
@@ -36,7 +36,6 @@ from rmbench.suite.plan import (
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.training.loop import CURVE_CSV, STATE, TrainConfig
-from rmbench.video import write_atomic
 
 
 # ------------------------------------------------------------------------------ done yet?
@@ -205,8 +204,7 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
             summary = copy_layouts(root, plan.train_data_dir(out, task), plan.rendered_copies,
                                    plan.rendered_reach, seed=0, episodes=plan.demos,
                                    workers=workers, progress=progress)
-        write_atomic(copies_record(plan, out, task),
-                     (json.dumps(summary.to_dict(), indent=1) + "\n").encode())
+        write_json(copies_record(plan, out, task), summary.to_dict())
     for cache, wanted in feature_caches(plan, out, task):
         todo = cache.missing(*wanted)  # (reads every file's header: once)
         if todo:
@@ -248,7 +246,7 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
                      **extra)
         timing = {k: result[k] for k in ("train_wall_s", "train_wall_from_step", "machines",
                                          "executor_from") if k in result}
-        write_atomic(folder / TIMING, (json.dumps(timing, indent=1) + "\n").encode())
+        write_json(folder / TIMING, timing)
     elif executor_spec(trained_spec(spec)) is not None:
         from rmbench.policies.mem0.train import check_executor_source
 

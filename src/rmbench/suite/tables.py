@@ -10,7 +10,6 @@ episodes' noise."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -19,13 +18,13 @@ from rmbench.eval.chance import chance
 from rmbench.eval.intervals import difference, format_difference, outside_noise, signed
 from rmbench.eval.published import ablation_names
 from rmbench.eval.report import PUBLISHED, Rate, format_cell, published_source, table
+from rmbench.files import write_atomic, write_json
 from rmbench.machine import describe, short
 from rmbench.suite.clock import DATA_WALLS, TIMING, read_json
 from rmbench.suite.plan import Plan, applies, split_seed
 from rmbench.suite.runner import column
 from rmbench.suite.stages import cell_row, pooled_row
 from rmbench.tasks import get_task
-from rmbench.video import write_atomic
 
 POLICY_TABLE = ("mem0", "mem0:no_memory", "dp", "act")
 ABLATION_TABLE = ("mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
@@ -199,6 +198,6 @@ def write(plan: Plan, out: Path, command: str = "", failed: dict[str, str] | Non
           ) -> dict[str, Any]:
     """``OUT/table.json`` and ``OUT/table.md``; the results."""
     res = results(plan, out, command, failed)
-    write_atomic(Path(out) / "table.json", (json.dumps(res, indent=1) + "\n").encode())
+    write_json(Path(out) / "table.json", res)
     write_atomic(Path(out) / "table.md", markdown(res).encode())
     return res

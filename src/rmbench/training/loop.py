@@ -41,11 +41,11 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
+from rmbench.files import write_atomic
 from rmbench.identity import differences
 from rmbench.machine import describe as describe_machine
 from rmbench.tasks.registry import recorded_gym_id
 from rmbench.training.device import check_device, flush_denormals
-from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
 

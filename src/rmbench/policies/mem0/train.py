@@ -6,7 +6,6 @@ their cached features by a frozen ``backbone``) or on its state observation
 from __future__ import annotations
 
 import hashlib
-import json
 import logging
 import time
 from collections.abc import Callable
@@ -21,6 +20,7 @@ from rmbench.data import layout as L
 from rmbench.data.layout_shift import COPIES_SEED, add_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, EpisodeOrderSampler, FrameCache
+from rmbench.files import write_json
 from rmbench.machine import describe as describe_machine
 from rmbench.policies.action_space import EE_DIM, EEActions
 from rmbench.policies.checkpoint import (
@@ -51,7 +51,6 @@ from rmbench.training.loop import (
     saved_run,
     train,
 )
-from rmbench.video import write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -186,8 +185,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
                    write_checkpoint=save_checkpoint, checkpoint_step=saved_step,
                    config_defaults=type(cfg)().to_dict())
     if trainer.planner_report is not None:
-        write_atomic(out / "training" / "planner.json",
-                     (json.dumps(trainer.planner_report, indent=2) + "\n").encode())
+        write_json(out / "training" / "planner.json", trainer.planner_report, indent=2)
     return result
 
 
@@ -223,8 +221,7 @@ def _beside_executor(source: Path, step: int, model: Mem0Model, out: Path,
     model.executor.load_state_dict({k.removeprefix("executor."): v for k, v in weights.items()
                                     if k.startswith("executor.")})
     # the planner's report first: the checkpoint's config is what says the run is done
-    write_atomic(out / "training" / "planner.json",
-                 (json.dumps(planner_report, indent=2) + "\n").encode())
+    write_json(out / "training" / "planner.json", planner_report, indent=2)
     save_checkpoint(out, model, {**describe, "executor_from": str(source.resolve()),
                                  "executor_sha256": executor_digest(weights)}, step)
     return {"steps": step, "resumed_from": 0, "wall_s": round(wall_s, 1),

@@ -1,0 +1,41 @@
+"""Atomic files: a reader sees the old file or the whole new one, never a half-written one.
+
+Every file rmbench writes that another process may read, or that a killed run leaves behind
+(datasets, checkpoints, records, reports, results), is written under a temporary name in
+its own folder and renamed into place (``os.replace`` is atomic within a filesystem).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+
+@contextmanager
+def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
+    """A temporary path beside ``path`` for a writer that wants a file name (parquet, np.save):
+    renamed onto ``path`` when the block ends without an error, removed otherwise.
+    ``suffix`` keeps an extension a writer insists on (np.save appends ``.npy``)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp{suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_atomic(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write(data)
+
+
+def write_json(path: str | Path, obj: Any, indent: int = 1) -> None:
+    """``obj`` as indented JSON with a final newline, written atomically."""
+    write_atomic(path, (json.dumps(obj, indent=indent) + "\n").encode())
