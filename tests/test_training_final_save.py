@@ -9,6 +9,7 @@ import torch
 from safetensors.torch import load_file
 from torch import nn
 
+from rmbench import files
 from rmbench.policies import checkpoint
 from rmbench.policies.checkpoint import save_checkpoint, saved_step
 from rmbench.training import loop
@@ -86,6 +87,7 @@ def final_save_writes(monkeypatch, die_after: int | None) -> list[str]:
     monkeypatch.setattr(loop, "_save", tracked_save)
     monkeypatch.setattr(loop, "write_atomic", tracked_write)
     monkeypatch.setattr(checkpoint, "write_atomic", tracked_write)
+    monkeypatch.setattr(files, "write_atomic", tracked_write)  # write_json's writes
     return writes
 
 

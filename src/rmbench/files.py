@@ -36,6 +36,7 @@ def write_atomic(path: str | Path, data: bytes) -> None:
         f.write(data)
 
 
-def write_json(path: str | Path, obj: Any, indent: int = 1) -> None:
-    """``obj`` as indented JSON with a final newline, written atomically."""
+def write_json(path: str | Path, obj: Any, indent: int | None = 1) -> None:
+    """``obj`` as JSON (indented, or on one line with ``indent=None``) with a final newline,
+    written atomically."""
     write_atomic(path, (json.dumps(obj, indent=indent) + "\n").encode())
