@@ -1,4 +1,5 @@
 import copy
+import importlib.util
 import os
 import signal
 import sys
@@ -76,6 +77,16 @@ def pytest_runtest_call(item):
 def pytest_runtest_teardown(item):
     with time_limit(item, "teardown"):
         yield
+
+
+def load_script(relative: str):
+    """A script of the repository that is no package module (benchmarks/, scripts/), loaded
+    from its path, e.g. ``load_script("benchmarks/table_state.py")``."""
+    path = SRC.parent / relative
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def small_collection(out, **kw) -> CollectConfig:

@@ -2,20 +2,18 @@
 and docs/ is what scripts/render_docs.py renders from benchmarks/results/, and every results
 page shows its first table within its first 40 lines."""
 
-import importlib.util
 import re
 from pathlib import Path
 
 import pytest
 
+from tests.conftest import load_script
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _render_docs():
-    spec = importlib.util.spec_from_file_location("render_docs", ROOT / "scripts" / "render_docs.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("scripts/render_docs.py")
 
 
 def test_committed_tables_match_their_json():

@@ -13,6 +13,7 @@ from rmbench.eval.probe import MemoryReset, ResetTrigger, compare
 from rmbench.eval.seeds import verified_seeds
 from rmbench.policies import BasePolicy, make_policy, register_policy
 from rmbench.serve.server import PolicyServer
+from tests.conftest import load_script
 
 TASK = "put_back_block"
 STATE = {"render": False, "obs_type": "environment_state_agent_pos"}
@@ -225,14 +226,9 @@ def test_an_evaluation_runs_the_probe_beside_the_plain_arm(lookup, tmp_path):
     again = evaluate(EvalConfig((TASK,), "test_lookup", tmp_path / "out", **common))
     assert again["tasks"][TASK]["memory_reset"]["aliasing"] == probe
     # the results JSON beside a memoryless control cell (0 of 100 here)
-    import importlib.util
     import json
-    from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "memory_probe.py"
-    spec = importlib.util.spec_from_file_location("memory_probe_benchmark", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_script("benchmarks/memory_probe.py")
     ref = tmp_path / "ref.json"
     ref.write_text(json.dumps({"policies": {"mem0:no_memory": {"success_rate": 0.0,
                                                                 "episodes": 100}}}))

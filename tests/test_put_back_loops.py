@@ -1,20 +1,15 @@
 """benchmarks/put_back_loops.py: put-backs and moves read from the place predicates a task
 declares, and a task that declares none refused in one line."""
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.conftest import load_script
 
 
 def _loops():
-    spec = importlib.util.spec_from_file_location("loops", ROOT / "benchmarks" / "put_back_loops.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("benchmarks/put_back_loops.py")
 
 
 def test_put_backs_read_the_places_the_task_declares(tmp_path):

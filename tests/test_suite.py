@@ -3,7 +3,6 @@ folders, the jobs a table still needs, a toy table end to end (resumed, a corrup
 failing its cell alone) and the tables it writes."""
 
 import argparse
-import importlib.util
 import io
 import json
 import shlex
@@ -31,8 +30,7 @@ from rmbench.suite.plan import (
     run_name,
     trained_spec,
 )
-
-LEARNING = Path(__file__).resolve().parents[1] / "benchmarks" / "learning.py"
+from tests.conftest import load_script
 
 
 def test_policy_specs_and_their_columns():
@@ -295,9 +293,7 @@ def test_learning_benchmark_is_the_table_for_one_task(toy_table, tmp_path):
     """benchmarks/learning.py with the toy table's settings finds its cells done and writes its
     results file from them."""
     out, _ = toy_table
-    spec = importlib.util.spec_from_file_location("learning_benchmark", LEARNING)
-    learning = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(learning)
+    learning = load_script("benchmarks/learning.py")
     results = tmp_path / "r.json"
     assert learning.main(["--task", "observe_and_pickup", "--obs", "state", "--policies", "mem0,dp",
                           "--demos", "2", "--steps", "6", "--batch", "4", "--episodes", "1",

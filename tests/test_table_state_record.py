@@ -1,19 +1,15 @@
 """benchmarks/table_state.py: recording a table run's cells in the committed state table
 replaces each cell and keeps every replaced measurement of other data under ``superseded``."""
 
-import importlib.util
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.conftest import load_script
 
 
 @pytest.fixture
 def table_state(monkeypatch):
-    spec = importlib.util.spec_from_file_location("table_state", ROOT / "benchmarks" / "table_state.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script("benchmarks/table_state.py")
     # the cells' records read evaluation folders; the rows here stand for them
     monkeypatch.setattr(module, "cell_record", lambda row, task: dict(row))
     return module

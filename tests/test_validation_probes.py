@@ -1,21 +1,17 @@
 """benchmarks/validation_probes.py: a validation evaluation becomes one row of the probes'
 results; test episodes and unfinished runs are refused in one line."""
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.conftest import load_script
 
 
 @pytest.fixture
 def probes():
-    spec = importlib.util.spec_from_file_location("probes", ROOT / "benchmarks" / "validation_probes.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("benchmarks/validation_probes.py")
 
 
 def _eval(folder: Path, split="validation", done=100, successes=79) -> Path:
