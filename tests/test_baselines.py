@@ -417,6 +417,27 @@ def test_state_noise_reaches_the_baselines_encoder(name, dataset):
     assert chosen.any() and not chosen.all()
     assert torch.equal(delta[..., ~chosen], torch.zeros_like(delta[..., ~chosen]))
     assert float(delta[..., chosen].std()) == pytest.approx(0.01, rel=0.15)
+    # shuffle_entities: the objects trade slots, one order per sample across its window
+    model = model_cls(replace(cfg, state_noise=0.0, shuffle_entities=("object",)), len(names))
+    seen.clear()
+    model.observe = lambda inputs, state: (seen.append(inputs[0]), torch.zeros(len(state), 1))[1]
+    trainer_cls(model, 0, names).observe(batch)
+    recorded = batch[L.ENV_STATE].reshape(len(batch[L.STATE]), -1, len(names))
+    read = seen[0].reshape(recorded.shape)
+    slots = [[i for i, n in enumerate(names) if n.startswith(f"object{k}_")] for k in range(5)]
+    rest = [i for i in range(len(names)) if not any(i in s for s in slots)]
+    assert torch.equal(read[..., rest], recorded[..., rest])
+    orders = set()
+    for row in range(len(read)):
+        # where each slot's object came from, at every step of the sample's window
+        came_from = {tuple(next(k for k, other in enumerate(slots)
+                                if torch.equal(read[row, t, slot], recorded[row, t, other]))
+                           for slot in slots) for t in range(read.shape[1])}
+        assert len(came_from) == 1  # one order across the window
+        (order,) = came_from
+        assert sorted(order) == list(range(5))
+        orders.add(order)
+    assert len(orders) > 1  # and a fresh one per sample
     # joint_noise: the joint state the encoder reads moves, its target's reference does not
     model = model_cls(replace(cfg, joint_noise=0.02), len(names))
     states = []

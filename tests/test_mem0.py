@@ -686,6 +686,85 @@ def test_state_noise_moves_object_positions_only(dataset):
         replace(TINY, memory_noise=0.01)  # pixels
 
 
+def test_shuffle_entities_trades_whole_objects_between_slots(dataset):
+    """shuffle_entities: what the encoder reads in training holds the same five objects, each
+    with all of its entries, in a new slot order per frame; every other entry stays exact;
+    nothing moves without it, and a stem that names no entities is a one-line error."""
+    from rmbench.data import layout as L
+    from rmbench.data.torch_dataset import EpisodeOrderSampler
+    from rmbench.policies.mem0.modeling import Mem0Trainer
+    from rmbench.policies.mem0.train import Mem0Frames, build_model, goal_text
+    from rmbench.training.batches import batch_stream
+
+    ds = Dataset(dataset)
+    names = ds.state_names
+    texts = list(ds.subtasks) + [goal_text(ds.task)]
+    describe = {"executor_texts": texts, "planner_texts": list(ds.subtasks) + ["done"],
+                "text_encoder": "learned", "state_names": names}
+    frames = Mem0Frames(ds, TINY_STATE, False, len(texts) - 1)
+    batch = next(batch_stream(frames, EpisodeOrderSampler(frames, 64, seed=0), 0))
+    state = batch[L.ENV_STATE]
+    slots = [[i for i, n in enumerate(names) if n.startswith(f"object{k}_")] for k in range(5)]
+    rest = [i for i in range(len(names)) if not any(i in s for s in slots)]
+    assert len({len(s) for s in slots}) == 1 and rest
+    model = build_model(replace(TINY_STATE, shuffle_entities=("object",)), describe)
+    seen = []
+    encode = model.executor.encode
+    model.executor.encode = lambda inputs: (seen.append(inputs), encode(inputs))[1]
+    Mem0Trainer(model, 64, False, 0, names)(batch)
+    read = seen[0][0]
+    assert torch.equal(read[:, rest], state[:, rest])
+    moved = 0
+    for row in range(len(state)):
+        came_from = []
+        for slot in slots:
+            match = [k for k, other in enumerate(slots)
+                     if torch.equal(read[row, slot], state[row, other])]
+            assert match, "an object's entries were split or changed"
+            came_from.append(match[0])
+        assert sorted(came_from) == list(range(5))
+        moved += came_from != list(range(5))
+    assert moved > len(state) // 2  # a fresh order per frame, mostly not the recorded one
+    assert Mem0Trainer(build_model(TINY_STATE, describe), 64, False, 0, names).exchange is None
+    with pytest.raises(ValueError, match="'cube' names 0 entities"):
+        Mem0Trainer(build_model(replace(TINY_STATE, shuffle_entities=("cube",)), describe),
+                    64, False, 0, names)
+    with pytest.raises(ValueError, match="shuffle_entities"):
+        replace(TINY, observation="pixels", shuffle_entities=("object",))
+
+
+def test_relabel_one_hots_renames_a_value_in_every_entity_of_the_frame(dataset):
+    """relabel_one_hots: per frame, one renaming of the colours applied to the five objects and
+    the reference alike, so which objects share a colour with the reference is kept; every
+    other entry is exact; a category with no entries is a one-line error."""
+    from rmbench.policies.observation import exchange_groups, shuffle_groups
+
+    ds = Dataset(dataset)
+    names = list(ds.state_names)
+    state = torch.as_tensor(np.concatenate([ds.episode(i, []).environment_state for i in range(2)]))
+    colours = ("red", "green", "blue", "yellow")
+    owners = [f"object{k}" for k in range(5)] + ["reference"]
+    cells = [[names.index(f"{o}_colour_{c}") for c in colours] for o in owners]
+    groups = exchange_groups(replace(TINY_STATE, relabel_one_hots=("colour",)), names)
+    read = shuffle_groups(state, groups, torch.Generator().manual_seed(0))
+    rest = [i for i in range(len(names)) if not any(i in row for row in cells)]
+    assert torch.equal(read[:, rest], state[:, rest])
+    renamed = 0
+    for before, after in zip(state, read, strict=True):
+        rename = {}
+        for row in cells:
+            old, new = before[row], after[row]
+            assert old.sum() == new.sum()  # a shown colour stays shown, a hidden one hidden
+            if old.sum():
+                a, b = int(old.argmax()), int(new.argmax())
+                assert rename.setdefault(a, b) == b  # one renaming for the whole frame
+        assert len(set(rename.values())) == len(rename)
+        renamed += any(a != b for a, b in rename.items())
+    assert renamed > len(state) // 2
+    with pytest.raises(ValueError, match="'size' names 0 entities"):
+        exchange_groups(replace(TINY_STATE, relabel_one_hots=("size",)), names)
+
+
 def test_ee_actions_train_and_run_as_joint_targets(dataset, tmp_path):
     """action_space "ee": the head predicts 20-number grasp poses, the policy hands the env 14
     joint targets, and a joint-relative setting is refused."""

@@ -30,6 +30,7 @@ from rmbench.suite.plan import (
     run_name,
     trained_spec,
 )
+from rmbench.tasks.registry import UnknownTaskError
 from tests.conftest import load_script
 
 
@@ -117,7 +118,39 @@ def test_the_state_recipe_is_the_state_tables_default(tmp_path):
     # outside a table (benchmarks/learning.py) the options start from the generic defaults
     parser = argparse.ArgumentParser()
     add_recipe_arguments(parser)
-    assert recipe_of(parser.parse_args([])) == {**GENERIC, "sets": ()}
+    assert recipe_of(parser.parse_args([])) == {**GENERIC, "sets": (), "task_sets": {}}
+
+
+def test_task_sets_reach_their_task_alone(tmp_path):
+    """A plan's task_sets add items to one task's cells: its configs and folders change, the
+    other tasks' stay those of the plan without them; the items survive the job's JSON, an
+    option for the same field replaces them, and an unknown task or field is refused."""
+    shuffle = 'mem0.shuffle_entities=["object"]'
+    tasks, policies = ("observe_and_pickup", "put_back_block"), ("mem0", "dp")
+    plain = Plan("state", tasks, policies, sets=("mem0.execute=20",))
+    plan = Plan("state", tasks, policies, sets=("mem0.execute=20",),
+                task_sets={"observe_and_pickup": (shuffle,)})
+    assert plan.sets_of("observe_and_pickup") == ("mem0.execute=20", shuffle)
+    assert plan.sets_of("put_back_block") == plain.sets_of("put_back_block")
+    assert config_for("mem0", "state", plan.sets_of("observe_and_pickup")).shuffle_entities \
+        == ("object",)
+    assert config_for("dp", "state", plan.sets_of("observe_and_pickup")).shuffle_entities == ()
+    for folder in ("train_dir", "eval_dir"):
+        for task, same in (("put_back_block", True), ("observe_and_pickup", False)):
+            mine, theirs = (getattr(p, folder)(tmp_path, task, "mem0") for p in (plan, plain))
+            assert (mine == theirs) is same
+    assert Plan.from_dict(json.loads(json.dumps(plan.to_dict()))) == plan
+    assert Plan.from_dict({k: v for k, v in plain.to_dict().items() if k != "task_sets"}) == plain
+    # an option for the same field replaces the recipe's task item, as it does a shared one
+    parser = argparse.ArgumentParser()
+    add_recipe_arguments(parser, defaults="recipe")
+    base = {**GENERIC, "task_sets": {"observe_and_pickup": (shuffle,)}}
+    assert recipe_of(parser.parse_args([]), base)["task_sets"] == base["task_sets"]
+    assert recipe_of(parser.parse_args(["--set", "mem0.shuffle_entities=[]"]), base)["task_sets"] == {}
+    with pytest.raises(UnknownTaskError, match="unknown task"):
+        Plan("state", tasks, policies, task_sets={"no_such_task": (shuffle,)})
+    with pytest.raises(ValueError, match="FIELD=VALUE"):
+        Plan("state", tasks, policies, task_sets={"put_back_block": ("no_such_field=1",)})
 
 
 def test_a_long_recipe_gets_a_folder_name_the_file_system_takes(tmp_path):
@@ -372,7 +405,7 @@ def test_the_collect_job_solves_the_layout_copies_the_trainings_read(dataset, tm
 
     plan = Plan("state", (TASK,), ("mem0", "dp"), demos=3, steps=2, batch=2, episodes=1,
                 sets=("layout_copies=2", "layout_shift=0.02"))
-    assert stages.layout_copy_sets(plan) == [(2, 0.02)]  # one set for both policies
+    assert stages.layout_copy_sets(plan, TASK) == [(2, 0.02)]  # one set for both policies
     shutil.copytree(dataset, plan.data_dir(tmp_path, TASK), ignore=shutil.ignore_patterns(".cache"))
     assert stages.demos_collected(plan, tmp_path, TASK) and not stages.collected(plan, tmp_path, TASK)
     assert runner.Job("collect", TASK) in runner.plan_jobs(plan, tmp_path)

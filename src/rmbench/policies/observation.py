@@ -20,6 +20,7 @@ cache (``feature_cache.py``) and the closed loop runs the backbone on each step'
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,6 +69,21 @@ class ReadsObservation:
     state_noise_on: tuple[str, ...] = ()
     """Name prefixes of the position entries ``state_noise`` applies to (empty: all of them),
     e.g. ("mat_",) to blur the layout and keep the cube and the button exact."""
+    shuffle_entities: tuple[str, ...] = ()
+    """With observation "state", training only: name stems of exchangeable entities, whose
+    entries ``{stem}0_*``, ``{stem}1_*``, ... in the environment state trade places at random
+    at every training frame (all of an entity's entries move together). Where a task lists
+    objects of one kind in slots drawn at random (observe_and_pickup's five table objects), a
+    slot's index says nothing, yet fifty demonstrations tie each target to the slot it happened
+    to take; the shuffle leaves the policy only what an object is and where it stands to find
+    it by, as a camera would."""
+    relabel_one_hots: tuple[str, ...] = ()
+    """With observation "state", training only: one-hot categories (``colour`` for entries
+    such as ``object0_colour_red``) whose values are renamed at random at every training
+    frame, one renaming for every entity of the frame (the reference's and the table objects'
+    alike): red becomes blue everywhere, say. Where a value only says which objects match
+    (observe_and_pickup's colours, which change no grasp), fifty demonstrations show fifty
+    pairings of values; the renaming shows the rule, same value, same object, on all of them."""
     joint_noise: float = 0.0
     """Training only: std (radians) of Gaussian noise on the twelve arm-joint positions the
     policy reads at every training frame (the grippers' openings, and the state relative
@@ -95,6 +111,9 @@ class ReadsObservation:
         if self.grasp_pose_input and self.observation == PIXELS:
             raise ValueError("grasp_pose_input is read by the state encoder: it needs "
                              "observation 'state'")
+        if (self.shuffle_entities or self.relabel_one_hots) and self.observation == PIXELS:
+            raise ValueError("shuffle_entities and relabel_one_hots move entries of the "
+                             "environment state: they need observation 'state'")
         if self.layout_copies < 0 or not self.layout_shift >= 0:
             raise ValueError(f"layout_copies and layout_shift must be >= 0, got "
                              f"{self.layout_copies} and {self.layout_shift}")
@@ -169,6 +188,64 @@ def position_noise_scale(sigma: float, prefixes, state_names) -> torch.Tensor | 
     prefixes = tuple(prefixes)
     return torch.tensor([sigma if is_position(n) and (not prefixes or n.startswith(prefixes))
                          else 0.0 for n in state_names])
+
+
+def exchange_groups(cfg: ReadsObservation, state_names) -> list[torch.Tensor] | None:
+    """What ``shuffle_entities`` and ``relabel_one_hots`` let trade places in ``state_names``,
+    as index tensors (rows that trade places, the entries each row moves): an entity stem's
+    (K entities, m entries), each row in the same entry order; a category's (V values,
+    E entities), row v that value's entry in every entity. None when nothing trades. A stem or
+    category that names too little, or whose rows differ, is a one-line ValueError."""
+    if not cfg.reads_state:
+        return None
+    groups = []
+    for stem in cfg.shuffle_entities:
+        rows = _rows(stem, rf"{re.escape(stem)}(\d+)_(.+)", state_names, "shuffle_entities",
+                     "entities", f"{stem}0_..., {stem}1_...")
+        groups.append(torch.tensor([[i for _, i in row] for row in rows]))
+    for category in cfg.relabel_one_hots:
+        rows = _rows(category, rf"(.+)_{re.escape(category)}_([^_]+)", state_names,
+                     "relabel_one_hots", "entities", f"OBJECT_{category}_VALUE")
+        groups.append(torch.tensor([[i for _, i in row] for row in rows]).T.contiguous())
+    return groups or None
+
+
+def _rows(name: str, pattern: str, state_names, option: str, what: str,
+          form: str) -> list[list[tuple[str, int]]]:
+    """The entries ``pattern`` (two groups: a row's key, then the entry's name within the row)
+    matches, as rows of (entry name, index) in key order; every row the same entries."""
+    members: dict[str, list[tuple[str, int]]] = {}
+    for i, entry in enumerate(state_names):
+        if m := re.fullmatch(pattern, entry):
+            members.setdefault(m[1], []).append((m[2], i))
+    if not members or (option == "shuffle_entities" and len(members) < 2):
+        raise ValueError(f"{option}: {name!r} names {len(members)} {what} ({form}) in the "
+                         f"environment state; it needs two or more")
+    keys = sorted(members, key=lambda k: (len(k), k))
+    rows = [members[k] for k in keys]
+    if any([e for e, _ in row] != [e for e, _ in rows[0]] for row in rows):
+        raise ValueError(f"{option}: the {name!r} {what} have different entries, so they "
+                         f"cannot trade places")
+    if len(rows[0]) < 2 and option == "relabel_one_hots":
+        raise ValueError(f"{option}: {name!r} has {len(rows[0])} value; a renaming needs two "
+                         f"or more")
+    return rows
+
+
+def shuffle_groups(env_state: torch.Tensor, groups: list[torch.Tensor] | None,
+                   generator: torch.Generator) -> torch.Tensor:
+    """``env_state`` (B, ..., D) with each group's rows in a random order, one order per
+    batch row (kept over the row's other leading dimensions, an observation window's steps);
+    unchanged, and no random number drawn, when ``groups`` is None."""
+    if groups is None:
+        return env_state
+    out = env_state.clone()
+    b, middle = env_state.shape[0], env_state.shape[1:-1]
+    for index in groups:
+        order = torch.rand((b, index.shape[0]), generator=generator).argsort(1)
+        source = index[order].reshape(b, *(1,) * len(middle), -1)
+        out[..., index.reshape(-1)] = env_state.gather(-1, source.expand(b, *middle, -1))
+    return out
 
 
 def joint_noise_scale(cfg: ReadsObservation) -> torch.Tensor | None:

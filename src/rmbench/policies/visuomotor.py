@@ -59,8 +59,10 @@ from rmbench.policies.observation import (
     camera_inputs,
     check_observation,
     choose,
+    exchange_groups,
     joint_noise_scale,
     set_state_stats,
+    shuffle_groups,
     state_inputs,
     state_noise_scale,
     state_tensor,
@@ -152,6 +154,7 @@ class VisuomotorTrainer(nn.Module):
         self.model = model
         self.generator = torch.Generator().manual_seed(seed)
         self.noise_scale = state_noise_scale(model.cfg, state_names)
+        self.exchange = exchange_groups(model.cfg, state_names)
         self.joint_scale = joint_noise_scale(model.cfg)
 
     def observe(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -163,7 +166,8 @@ class VisuomotorTrainer(nn.Module):
             state = state[:, None]
         b, n = state.shape[:2]
         if cfg.reads_state:
-            env_state = add_state_noise(batch[L.ENV_STATE], self.noise_scale, self.generator)
+            env_state = shuffle_groups(batch[L.ENV_STATE], self.exchange, self.generator)
+            env_state = add_state_noise(env_state, self.noise_scale, self.generator)
             inputs = [env_state.reshape(b * n, -1), state.reshape(b * n, -1)]
         elif cfg.reads_features:  # no jitter on cached features (feature_cache.py)
             inputs = [batch[features_key(cam)].flatten(0, -4) for cam in cfg.cameras]

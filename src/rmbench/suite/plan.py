@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -203,7 +203,8 @@ def memory_of(spec: str, tmc: str, cfg) -> str:
 
 # Plan's recipe fields when nothing says otherwise (benchmarks/learning.py starts from these).
 GENERIC = {"demos": 50, "steps": 3000, "batch": 32, "episodes": 100, "noise": 0.0,
-           "noise_kind": "white", "sets": (), "rendered_copies": 0, "rendered_reach": 0.04}
+           "noise_kind": "white", "sets": (), "task_sets": {}, "rendered_copies": 0,
+           "rendered_reach": 0.04}
 # The recipe each observation's table is made with, what ``rmbench table --obs OBS`` uses
 # unless an option says otherwise (``--set`` items are added after the recipe's: a later item
 # for the same field wins). The state table's (docs/results/benchmark_state.md): 50
@@ -248,7 +249,7 @@ def add_recipe_arguments(parser, defaults: str = "generic") -> None:
     parser.add_argument("--set", action="append", default=[], metavar="[POLICY.]FIELD=VALUE",
                         help="override every policy config that has the field, or POLICY's "
                              "alone (mem0.execute=20); VALUE as JSON; repeatable; added after "
-                             f"the {where} items")
+                             f"the {where.removeprefix('the ')} items")
     parser.add_argument("--rendered-copies", type=int, metavar="N",
                         help="train on each demonstration and N rendered copies of it with the "
                              "scene moved (`rmbench dataset copy-layouts`; the pixel track's "
@@ -271,7 +272,10 @@ def recipe_of(args, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
     # spells the whole recipe out names the folders it always named
     mine = {_target(item) for item in args.set}
     kept = tuple(item for item in base["sets"] if _target(item) not in mine)
-    return {**recipe, "sets": kept + tuple(args.set)}
+    per_task = {task: tuple(item for item in items if _target(item) not in mine)
+                for task, items in base.get("task_sets", {}).items()}
+    return {**recipe, "sets": kept + tuple(args.set),
+            "task_sets": {task: items for task, items in per_task.items() if items}}
 
 
 @dataclass(frozen=True)
@@ -293,6 +297,10 @@ class Plan:
     sets: tuple[str, ...] = ()
     """``FIELD=VALUE`` overrides of every policy config that has the field (``rmbench train
     --set``), ``POLICY.FIELD=VALUE`` of one policy's (``mem0.execute=20``)."""
+    task_sets: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    """More such items for one task's cells alone, after ``sets`` (``sets_of``): a setting
+    that only that task's environment state has a use for (the state recipe's shuffle of
+    observe_and_pickup's objects)."""
     video: str = "none"
     """The evaluation's videos (``rmbench eval --video``)."""
     device: str = "cpu"
@@ -317,6 +325,8 @@ class Plan:
         object.__setattr__(self, "policies", tuple(dict.fromkeys(
             with_seed(*split_seed(p)) for p in self.policies)))  # "@0" is the plain spec
         object.__setattr__(self, "sets", tuple(self.sets))
+        object.__setattr__(self, "task_sets", {get_task(t).name: tuple(items)
+                                               for t, items in self.task_sets.items()})
         for spec in self.policies:
             parse_policy(spec)
         if min(self.demos, self.steps, self.batch, self.episodes) < 1:
@@ -330,15 +340,27 @@ class Plan:
         NoiseSpec(self.noise_kind, self.noise)  # a bad kind or sigma: one line
         check_device(self.device)
         check_sets(self.sets)
-        for spec in {trained_spec(s) for s in self.policies}:  # a config refusing a value
-            config_for(spec, self.obs, self.sets)
+        for items in self.task_sets.values():
+            check_sets(items)
+        for task in self.tasks:  # a config refusing a value
+            for spec in {trained_spec(s) for s in self.policies}:
+                config_for(spec, self.obs, self.sets_of(task))
+
+    def sets_of(self, task: str) -> tuple[str, ...]:
+        """The ``--set`` items the task's cells train with: ``sets``, then its ``task_sets``."""
+        return self.sets + self.task_sets.get(task, ())
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Plan:
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+        d = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+        if "task_sets" in d:
+            d["task_sets"] = {t: tuple(items) for t, items in d["task_sets"].items()}
+        return cls(**d)
 
     def to_dict(self) -> dict[str, Any]:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        d["task_sets"] = {t: list(items) for t, items in self.task_sets.items()}
+        return d
 
     def cells(self) -> list[tuple[str, str]]:
         """(task, spec) of every cell, tasks in the benchmark's order (M(1), then M(n))."""
@@ -358,11 +380,11 @@ class Plan:
         return Path(out) / task / f"data{self._copies_tag()}"
 
     def train_dir(self, out: Path, task: str, spec: str) -> Path:
-        run = run_name(trained_spec(spec), self.steps, self.batch, self.sets)
+        run = run_name(trained_spec(spec), self.steps, self.batch, self.sets_of(task))
         return Path(out) / task / "train" / bounded(f"{run}{self._copies_tag()}")
 
     def eval_dir(self, out: Path, task: str, spec: str) -> Path:
-        run = run_name(spec, self.steps, self.batch, self.sets)
+        run = run_name(spec, self.steps, self.batch, self.sets_of(task))
         split = "" if self.split == "test" else f"-{self.split}"
         return Path(out) / task / "eval" / bounded(
             f"{run}{self._copies_tag()}-e{self.episodes}{split}")

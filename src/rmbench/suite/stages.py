@@ -55,15 +55,15 @@ def collected(plan: Plan, out: Path, task: str) -> bool:
         return False
     data = plan.train_data_dir(out, task)
     return all(layout_copies_cached(data, n, reach, COPIES_SEED)
-               for n, reach in layout_copy_sets(plan))
+               for n, reach in layout_copy_sets(plan, task))
 
 
-def layout_copy_sets(plan: Plan) -> list[tuple[int, float]]:
-    """The (copies, reach) of each set of layout copies the plan's policies train with
-    (``--set layout_copies``): solved once per dataset, by its collection."""
+def layout_copy_sets(plan: Plan, task: str) -> list[tuple[int, float]]:
+    """The (copies, reach) of each set of layout copies the plan's policies train with on
+    ``task`` (``--set layout_copies``): solved once per dataset, by its collection."""
     sets = set()
     for spec in {trained_spec(s) for s in plan.policies}:
-        c = config_for(spec, plan.obs, plan.sets)
+        c = config_for(spec, plan.obs, plan.sets_of(task))
         if c.layout_copies and c.layout_shift:
             sets.add((c.layout_copies, c.layout_shift))
     return sorted(sets)
@@ -90,7 +90,7 @@ def feature_caches(plan: Plan, out: Path, task: str) -> list[tuple[Any, tuple[li
     root = plan.train_data_dir(out, task)
     cameras: dict[tuple, set[str]] = {}  # (backbone, stride, image size) -> cameras read
     for spec in {trained_spec(s) for s in plan.policies}:
-        c = config_for(spec, plan.obs, plan.sets)
+        c = config_for(spec, plan.obs, plan.sets_of(task))
         if c.reads_features:
             cameras.setdefault((c.backbone, c.backbone_stride, tuple(c.image_size)),
                                set()).update(c.cameras)
@@ -211,7 +211,7 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
             with timed(root.parent, "features_wall_s"):
                 cache.encode(todo)
     data = plan.train_data_dir(out, task)
-    for n, reach in layout_copy_sets(plan):
+    for n, reach in layout_copy_sets(plan, task):
         if not layout_copies_cached(data, n, reach, COPIES_SEED):
             with timed(root.parent, "layout_copies_wall_s"):
                 solve_layout_copies(data, n, reach, COPIES_SEED, workers)
@@ -233,7 +233,7 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
     folder = plan.train_dir(out, task, spec)
     if not trained(plan, out, task, spec):
         spec = trained_spec(spec)
-        cfg = config_for(spec, plan.obs, plan.sets)
+        cfg = config_for(spec, plan.obs, plan.sets_of(task))
         train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=split_seed(spec)[1],
                                 save_every=min(500, plan.steps), device=plan.device)
         _, fit = trainable(parse_policy(spec)[0])
@@ -287,7 +287,7 @@ def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | No
     if result is None:
         return None
     ckpt, evals = plan.train_dir(out, task, spec), plan.eval_dir(out, task, spec)
-    cfg = config_for(trained_spec(spec), plan.obs, plan.sets)
+    cfg = config_for(trained_spec(spec), plan.obs, plan.sets_of(task))
     return {**result_row(result, task, ckpt, evals, read_json(ckpt / TIMING, {}),
                          read_json(evals / TIMING, {})),
             "memory": memory_of(spec, get_task(task).tmc, cfg)}

@@ -160,7 +160,9 @@ def markdown(res: dict[str, Any], intervals: bool = True) -> str:
     lines = [f"# Benchmark table: {plan['obs']} observation", "",
              f"{plan['demos']} demonstrations per task, {plan['steps']} training steps at batch "
              f"{plan['batch']}, {plan['episodes']} evaluation episodes per cell"
-             + (f", `--set {' '.join(plan['sets'])}`" if plan["sets"] else "") + ".", "",
+             + (f", `--set {' '.join(plan['sets'])}`" if plan["sets"] else "")
+             + "".join(f"; on {task} also `--set {' '.join(items)}`"
+                       for task, items in plan.get("task_sets", {}).items()) + ".", "",
              f"## Policies (success rate, %{ci})", ""]
     specs = _columns(res, POLICY_TABLE)
     if specs:

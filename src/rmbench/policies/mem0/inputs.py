@@ -14,7 +14,7 @@ from rmbench.policies.mem0.config import Mem0Config
 from rmbench.policies.nn.backbone import camera_encoders
 from rmbench.policies.nn.state import StateEncoder
 from rmbench.policies.nn.vision import color_jitter
-from rmbench.policies.observation import add_state_noise
+from rmbench.policies.observation import add_state_noise, shuffle_groups
 
 
 def observation_encoder(cfg: Mem0Config, cameras: int, state_dim: int) -> nn.Module:
@@ -29,14 +29,17 @@ def observation_encoder(cfg: Mem0Config, cameras: int, state_dim: int) -> nn.Mod
 
 def step_inputs(batch: dict[str, torch.Tensor], cfg: Mem0Config, cameras: tuple[str, ...],
                 generator: torch.Generator | None, noise_scale: torch.Tensor | None = None,
-                state: torch.Tensor | None = None) -> list[torch.Tensor]:
+                state: torch.Tensor | None = None,
+                exchange: list[torch.Tensor] | None = None) -> list[torch.Tensor]:
     """A training batch's inputs to ``observation_encoder``: the frames of ``cameras``
     (jittered when ``generator`` is given), their cached backbone features, or the
-    environment state (plus ``state_noise``, per entry ``noise_scale``, when a generator is
-    given) and the joint state (``state``, default the batch's)."""
+    environment state (its ``exchange`` groups traded, then ``state_noise`` added, per entry
+    ``noise_scale``, when a generator is given) and the joint state (``state``, default the
+    batch's)."""
     if cfg.reads_state:
         env_state = batch[L.ENV_STATE]
         if generator is not None:
+            env_state = shuffle_groups(env_state, exchange, generator)
             env_state = add_state_noise(env_state, noise_scale, generator)
         return [env_state, batch[L.STATE] if state is None else state]
     if cfg.reads_features:

@@ -31,6 +31,7 @@ from rmbench.policies.nn.normalize import Normalizer
 from rmbench.policies.nn.text import TextTable
 from rmbench.policies.observation import (
     add_state_noise,
+    exchange_groups,
     joint_noise_scale,
     position_noise_scale,
     state_noise_scale,
@@ -117,6 +118,7 @@ class Mem0Trainer(nn.Module):
         self.decompose = decompose
         cfg = model.cfg
         self.noise_scale = state_noise_scale(cfg, state_names)
+        self.exchange = exchange_groups(cfg, state_names)
         self.memory_scale = position_noise_scale(cfg.memory_noise, cfg.memory_noise_on,
                                                  state_names)
         self.joint_scale = joint_noise_scale(cfg)
@@ -143,7 +145,8 @@ class Mem0Trainer(nn.Module):
         ex, cfg = self.model.executor, self.model.cfg
         # the joint state the policy reads (noisy with joint_noise); targets use the exact one
         state = add_state_noise(batch[L.STATE], self.joint_scale, self.generator)
-        inputs = step_inputs(batch, cfg, cfg.cameras, self.generator, self.noise_scale, state)
+        inputs = step_inputs(batch, cfg, cfg.cameras, self.generator, self.noise_scale, state,
+                             self.exchange)
         tokens, z = ex.encode(inputs)
         # what the memories store: the same step, blurred further with memory_noise
         memory_tokens, memory_z = tokens, z
