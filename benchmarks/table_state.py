@@ -13,7 +13,9 @@ checkpoint made outside the table, such as a planner refit, which records where 
 from). Each recorded cell replaces its task's and column's cell. A replaced cell trained on
 another dataset format or run on another task version moves to ``superseded`` under
 ``--why``, so no measurement is dropped; otherwise it was the same recipe measured before, or
-one of the seeds the new cell pools.
+one of the seeds the new cell pools. ``--recipe-changed`` says the new cells were made with
+another recipe: the cells they replace move to ``superseded`` under ``--why`` even on the same
+data and task version.
 
 ``--seed N`` records the source's cells as training seed N of the cells already recorded
 (a recorded cell of one seed is seed 0), and the recorded cell becomes the pool of its seeds
@@ -110,11 +112,12 @@ def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> 
 
 def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: str,
            why: str, table: str, seed: int | None = None,
-           conditions: dict | None = None) -> dict:
+           conditions: dict | None = None, recipe_changed: bool = False) -> dict:
     """``doc`` with ``run``'s cells of ``tasks`` x ``specs`` in place of its own (or, with
     ``seed``, added to its own as that training seed); ``conditions``: the fields
     ``stated_conditions`` writes into each new cell's walls' conditions (``train_note`` into
-    its training's alone)."""
+    its training's alone); ``recipe_changed``: the cells replaced were another recipe's, kept
+    under ``superseded`` whatever their data and task version."""
     said = dict(conditions or {})
     stages = {"train": {"note": said.pop("train_note", None)}}  # the training's wall alone
     replaced: dict[str, dict] = {}
@@ -137,7 +140,8 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                     doc["cells"].get(task, {}).get(spec), new, seed, task, spec)
                 continue
             old = doc["cells"].setdefault(task, {}).get(spec)
-            same = old is not None and _version(task, old, spec) == _version(task, new, spec)
+            same = (old is not None and not recipe_changed
+                    and _version(task, old, spec) == _version(task, new, spec))
             if same and "seeds" in old and "seeds" not in new:
                 raise SystemExit(f"{task} {spec}: the recorded cell pools seeds "
                                  f"{sorted(old['seeds'])}; give --seed to replace one")
@@ -174,6 +178,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--dataset", required=True, help="the format the cells trained on (rmbench/N)")
     p.add_argument("--why", help="why the replaced cells no longer stand, in words (a cell of "
                                   "other data or another task version moves to superseded)")
+    p.add_argument("--recipe-changed", action="store_true",
+                   help="the cells were made with another recipe than those they replace: "
+                        "those move to superseded under --why")
     p.add_argument("--seed", type=int, help="the cells are this training seed of the recorded "
                                              "ones: pool them")
     p.add_argument("--obs", choices=("state", "pixels"), default="state",
@@ -211,7 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     doc = record(doc, run, args.tasks.split(","),
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
                  args.seed, {k: getattr(args, k) for k in (
-                     "machine", "jobs_beside", "beside", "threads", "workers", "note", "train_note")})
+                     "machine", "jobs_beside", "beside", "threads", "workers", "note", "train_note")},
+                 args.recipe_changed)
     write_json(args.out, doc)
     print(f"wrote {args.out}")
     return 0

@@ -46,6 +46,18 @@ def test_a_cell_of_the_same_data_is_replaced_without_a_copy(table_state):
     assert len(doc["superseded"]) == 1
 
 
+def test_a_cell_of_another_recipe_moves_to_superseded_on_the_same_data(table_state):
+    doc = table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", "format 1", "t")
+    doc = table_state.record(doc, _run(40), ["press_button"], ["mem0"], "rmbench/2",
+                             "the recipe changed", "t", recipe_changed=True)
+    assert doc["cells"]["press_button"]["mem0"]["successes"] == 40
+    (moved,) = [g for g in doc["superseded"] if g["why"] == "the recipe changed"]
+    assert moved["cells"]["press_button"]["mem0"]["successes"] == 36
+    with pytest.raises(SystemExit, match="--why"):
+        table_state.record(doc, _run(41), ["press_button"], ["mem0"], "rmbench/2", None, "t",
+                           recipe_changed=True)
+
+
 def test_a_cell_not_evaluated_is_a_one_line_error(table_state):
     with pytest.raises(SystemExit, match="press_button mem0:no_key is not evaluated yet"):
         table_state.record(_doc(), _run(), ["press_button"], ["mem0:no_key"], "rmbench/2", "x", "t")
