@@ -201,16 +201,16 @@ def exchange_groups(cfg: ReadsObservation, state_names) -> list[torch.Tensor] | 
     groups = []
     for stem in cfg.shuffle_entities:
         rows = _rows(stem, rf"{re.escape(stem)}(\d+)_(.+)", state_names, "shuffle_entities",
-                     "entities", f"{stem}0_..., {stem}1_...")
+                     f"{stem}0_..., {stem}1_...")
         groups.append(torch.tensor([[i for _, i in row] for row in rows]))
     for category in cfg.relabel_one_hots:
         rows = _rows(category, rf"(.+)_{re.escape(category)}_([^_]+)", state_names,
-                     "relabel_one_hots", "entities", f"OBJECT_{category}_VALUE")
+                     "relabel_one_hots", f"OBJECT_{category}_VALUE")
         groups.append(torch.tensor([[i for _, i in row] for row in rows]).T.contiguous())
     return groups or None
 
 
-def _rows(name: str, pattern: str, state_names, option: str, what: str,
+def _rows(name: str, pattern: str, state_names, option: str,
           form: str) -> list[list[tuple[str, int]]]:
     """The entries ``pattern`` (two groups: a row's key, then the entry's name within the row)
     matches, as rows of (entry name, index) in key order; every row the same entries."""
@@ -219,12 +219,12 @@ def _rows(name: str, pattern: str, state_names, option: str, what: str,
         if m := re.fullmatch(pattern, entry):
             members.setdefault(m[1], []).append((m[2], i))
     if not members or (option == "shuffle_entities" and len(members) < 2):
-        raise ValueError(f"{option}: {name!r} names {len(members)} {what} ({form}) in the "
+        raise ValueError(f"{option}: {name!r} names {len(members)} entities ({form}) in the "
                          f"environment state; it needs two or more")
     keys = sorted(members, key=lambda k: (len(k), k))
     rows = [members[k] for k in keys]
     if any([e for e, _ in row] != [e for e, _ in rows[0]] for row in rows):
-        raise ValueError(f"{option}: the {name!r} {what} have different entries, so they "
+        raise ValueError(f"{option}: the {name!r} entities have different entries, so they "
                          f"cannot trade places")
     if len(rows[0]) < 2 and option == "relabel_one_hots":
         raise ValueError(f"{option}: {name!r} has {len(rows[0])} value; a renaming needs two "

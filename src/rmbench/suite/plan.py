@@ -220,8 +220,9 @@ RECIPES = {
         "mem0.sample_noise=0"),
         # observe_and_pickup's five table objects sit in slots drawn at random and match the
         # reference by look alone: Mem-0 trains with their slots shuffled, their colours
-        # renamed and their positions also given as reach joints (docs/results/
-        # benchmark_state.md, "Recipe probes on the validation episodes")
+        # renamed and their positions also given as reach joints, the best of three probes on
+        # the validation episodes though inside their noise (docs/results/benchmark_state.md,
+        # "Recipe probes on the validation episodes")
         "task_sets": {"observe_and_pickup": (
             'mem0.shuffle_entities=["object"]', 'mem0.relabel_one_hots=["colour"]',
             'mem0.reach_input=["object0","object1","object2","object3","object4"]')}},
