@@ -53,7 +53,8 @@ from rmbench.eval.episode import ENDINGS
 from rmbench.files import write_json
 from rmbench.machine import describe
 from rmbench.suite import runner, stages
-from rmbench.suite.plan import Plan, add_recipe_arguments, recipe_of
+from rmbench.suite.plan import Plan
+from rmbench.suite.recipes import add_recipe_arguments, recipe_of
 from rmbench.tasks import get_task
 
 ROOT = Path(__file__).resolve().parent

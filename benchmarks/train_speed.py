@@ -27,11 +27,12 @@ from pathlib import Path
 
 from rmbench.files import write_json
 from rmbench.machine import describe
-from rmbench.suite.plan import RECIPES, sets_for
+from rmbench.suite.plan import sets_for
+from rmbench.suite.recipes import RECIPES
 
 ROOT = Path(__file__).resolve().parents[1]
 PYTHON = Path(sys.executable)
-# The state table's recipe for Mem-0 (rmbench table --obs state's, suite/plan.py RECIPES), as
+# The state table's recipe for Mem-0 (rmbench table --obs state's, suite/recipes.py RECIPES), as
 # rmbench train takes it; the state observation named, since the dataset holds a camera too.
 # (Mem-0's two M(n) settings, the event end classifier and the key delay, are its defaults.)
 RECIPE = ('observation="state"', *sets_for("mem0", RECIPES["state"]["sets"]))

@@ -616,13 +616,11 @@ def test_state_mem0_through_the_evaluation_harness(mn_state_ckpt, tmp_path):
     assert rec["reason"] in ("success", "task_failure", "timeout"), rec
 
 
-def test_state_noise_moves_object_positions_only(dataset):
-    """state_noise perturbs the environment state's *_x/_y/_z entries of what the encoder reads
-    in training, nothing else, by about the asked std; without it the inputs are untouched."""
-    from rmbench.data import layout as L
+def state_training_batch(dataset):
+    """A state dataset's names, the ``describe`` a Mem-0 model is built with, and one
+    episode-ordered training batch of 64 frames."""
     from rmbench.data.torch_dataset import EpisodeOrderSampler
-    from rmbench.policies.mem0.modeling import Mem0Trainer
-    from rmbench.policies.mem0.train import Mem0Frames, build_model, goal_text
+    from rmbench.policies.mem0.train import Mem0Frames, goal_text
     from rmbench.training.batches import batch_stream
 
     ds = Dataset(dataset)
@@ -631,7 +629,17 @@ def test_state_noise_moves_object_positions_only(dataset):
     describe = {"executor_texts": texts, "planner_texts": list(ds.subtasks) + ["done"],
                 "text_encoder": "learned", "state_names": names}
     frames = Mem0Frames(ds, TINY_STATE, False, len(texts) - 1)
-    batch = next(batch_stream(frames, EpisodeOrderSampler(frames, 64, seed=0), 0))
+    return names, describe, next(batch_stream(frames, EpisodeOrderSampler(frames, 64, seed=0), 0))
+
+
+def test_state_noise_moves_object_positions_only(dataset):
+    """state_noise perturbs the environment state's *_x/_y/_z entries of what the encoder reads
+    in training, nothing else, by about the asked std; without it the inputs are untouched."""
+    from rmbench.data import layout as L
+    from rmbench.policies.mem0.modeling import Mem0Trainer
+    from rmbench.policies.mem0.train import build_model
+
+    names, describe, batch = state_training_batch(dataset)
     position = torch.tensor([n.endswith(("_x", "_y", "_z")) for n in names])
     assert position.any() and not position.all()
     for noise in (0.0, 0.01):
@@ -691,18 +699,10 @@ def test_shuffle_entities_trades_whole_objects_between_slots(dataset):
     with all of its entries, in a new slot order per frame; every other entry stays exact;
     nothing moves without it, and a stem that names no entities is a one-line error."""
     from rmbench.data import layout as L
-    from rmbench.data.torch_dataset import EpisodeOrderSampler
     from rmbench.policies.mem0.modeling import Mem0Trainer
-    from rmbench.policies.mem0.train import Mem0Frames, build_model, goal_text
-    from rmbench.training.batches import batch_stream
+    from rmbench.policies.mem0.train import build_model
 
-    ds = Dataset(dataset)
-    names = ds.state_names
-    texts = list(ds.subtasks) + [goal_text(ds.task)]
-    describe = {"executor_texts": texts, "planner_texts": list(ds.subtasks) + ["done"],
-                "text_encoder": "learned", "state_names": names}
-    frames = Mem0Frames(ds, TINY_STATE, False, len(texts) - 1)
-    batch = next(batch_stream(frames, EpisodeOrderSampler(frames, 64, seed=0), 0))
+    names, describe, batch = state_training_batch(dataset)
     state = batch[L.ENV_STATE]
     slots = [[i for i, n in enumerate(names) if n.startswith(f"object{k}_")] for k in range(5)]
     rest = [i for i in range(len(names)) if not any(i in s for s in slots)]

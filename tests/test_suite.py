@@ -15,10 +15,7 @@ from rmbench.eval.chance import chance
 from rmbench.machine import describe, short
 from rmbench.suite import clock, runner, stages, tables
 from rmbench.suite.plan import (
-    GENERIC,
-    RECIPES,
     Plan,
-    add_recipe_arguments,
     applies,
     bounded,
     check_sets,
@@ -26,10 +23,10 @@ from rmbench.suite.plan import (
     executor_spec,
     memory_of,
     parse_policy,
-    recipe_of,
     run_name,
     trained_spec,
 )
+from rmbench.suite.recipes import GENERIC, RECIPES, add_recipe_arguments, recipe_of
 from rmbench.tasks.registry import UnknownTaskError
 from tests.conftest import load_script
 

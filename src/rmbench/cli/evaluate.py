@@ -8,7 +8,7 @@ import sys
 
 from rmbench.cli.common import add_json
 from rmbench.seeds import SPLITS
-from rmbench.suite.plan import add_recipe_arguments
+from rmbench.suite.recipes import add_recipe_arguments
 
 
 def cmd_eval(args) -> int:
@@ -94,7 +94,8 @@ def cmd_table(args) -> int:
     from pathlib import Path
 
     from rmbench.suite import runner, tables
-    from rmbench.suite.plan import ALL_POLICIES, RECIPES, Plan, recipe_of, with_seed
+    from rmbench.suite.plan import ALL_POLICIES, Plan, with_seed
+    from rmbench.suite.recipes import RECIPES, recipe_of
     from rmbench.tasks.registry import ordered
 
     tasks = ([t.name for t in ordered()] if args.tasks == "all"

@@ -201,34 +201,35 @@ def exchange_groups(cfg: ReadsObservation, state_names) -> list[torch.Tensor] | 
     groups = []
     for stem in cfg.shuffle_entities:
         rows = _rows(stem, rf"{re.escape(stem)}(\d+)_(.+)", state_names, "shuffle_entities",
-                     f"{stem}0_..., {stem}1_...")
+                     f"{stem}0_..., {stem}1_...", min_rows=2)
         groups.append(torch.tensor([[i for _, i in row] for row in rows]))
     for category in cfg.relabel_one_hots:
         rows = _rows(category, rf"(.+)_{re.escape(category)}_([^_]+)", state_names,
-                     "relabel_one_hots", f"OBJECT_{category}_VALUE")
+                     "relabel_one_hots", f"OBJECT_{category}_VALUE", min_entries=2)
         groups.append(torch.tensor([[i for _, i in row] for row in rows]).T.contiguous())
     return groups or None
 
 
-def _rows(name: str, pattern: str, state_names, option: str,
-          form: str) -> list[list[tuple[str, int]]]:
+def _rows(name: str, pattern: str, state_names, option: str, form: str, min_rows: int = 1,
+          min_entries: int = 1) -> list[list[tuple[str, int]]]:
     """The entries ``pattern`` (two groups: a row's key, then the entry's name within the row)
-    matches, as rows of (entry name, index) in key order; every row the same entries."""
+    matches, as rows of (entry name, index) in key order; every row the same entries, at
+    least ``min_rows`` rows of at least ``min_entries`` entries."""
     members: dict[str, list[tuple[str, int]]] = {}
     for i, entry in enumerate(state_names):
         if m := re.fullmatch(pattern, entry):
             members.setdefault(m[1], []).append((m[2], i))
-    if not members or (option == "shuffle_entities" and len(members) < 2):
+    if len(members) < min_rows or not members:
         raise ValueError(f"{option}: {name!r} names {len(members)} entities ({form}) in the "
-                         f"environment state; it needs two or more")
+                         f"environment state; it needs {max(min_rows, 1)} or more")
     keys = sorted(members, key=lambda k: (len(k), k))
     rows = [members[k] for k in keys]
     if any([e for e, _ in row] != [e for e, _ in rows[0]] for row in rows):
         raise ValueError(f"{option}: the {name!r} entities have different entries, so they "
                          f"cannot trade places")
-    if len(rows[0]) < 2 and option == "relabel_one_hots":
-        raise ValueError(f"{option}: {name!r} has {len(rows[0])} value; a renaming needs two "
-                         f"or more")
+    if len(rows[0]) < min_entries:
+        raise ValueError(f"{option}: {name!r} has {len(rows[0])} value; a renaming needs "
+                         f"{min_entries} or more")
     return rows
 
 

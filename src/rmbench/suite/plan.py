@@ -132,7 +132,7 @@ def policy_fields() -> dict[str, set[str]]:
     return {name: {f.name for f in fields(trainable(name)[0])} for name in TRAINABLE}
 
 
-def _target(item: str) -> tuple[str | None, str]:
+def target_of(item: str) -> tuple[str | None, str]:
     """``mem0.execute=20`` -> ("mem0", "execute"); ``execute=20`` -> (None, "execute")."""
     key = item.partition("=")[0]
     policy, dot, field = key.partition(".")
@@ -145,7 +145,7 @@ def check_sets(sets: tuple[str, ...] | list[str]) -> None:
     per_policy = policy_fields()
     known = set().union(*per_policy.values())
     for s in sets:
-        policy, field = _target(s)
+        policy, field = target_of(s)
         ok = "=" in s and (field in per_policy.get(policy, ()) if policy else field in known)
         if not ok:
             raise ValueError(f"--set {s!r}: expected FIELD=VALUE with a field of a policy's "
@@ -159,7 +159,7 @@ def sets_for(name: str, sets: tuple[str, ...] | list[str]) -> list[str]:
     POLICY.FIELD=VALUE naming it."""
     mine = []
     for item in sets:
-        policy, field = _target(item)
+        policy, field = target_of(item)
         if policy == name or (policy is None and field in policy_fields()[name]):
             mine.append(f"{field}={item.partition('=')[2]}")
     return mine
@@ -199,91 +199,6 @@ def memory_of(spec: str, tmc: str, cfg) -> str:
     if cfg.use_sliding:
         parts.append(f"sliding window ({cfg.sliding_window} x {cfg.memory_every} steps)")
     return " + ".join(parts) or "current step only"
-
-
-# Plan's recipe fields when nothing says otherwise (benchmarks/learning.py starts from these).
-GENERIC = {"demos": 50, "steps": 3000, "batch": 32, "episodes": 100, "noise": 0.0,
-           "noise_kind": "white", "sets": (), "task_sets": {}, "rendered_copies": 0,
-           "rendered_reach": 0.04}
-# The recipe each observation's table is made with, what ``rmbench table --obs OBS`` uses
-# unless an option says otherwise (``--set`` items are added after the recipe's: a later item
-# for the same field wins). The state table's (docs/results/benchmark_state.md): 50
-# demonstrations with DART noise, 18,000 steps at batch 128, Mem-0's head and chunk
-# settings, 2 cm of noise on the mats' positions, the grasp poses as input, 16 layout copies.
-# Mem-0's two M(n) settings (the event end classifier, the 12-frame key delay) are its
-# config's defaults.
-RECIPES = {
-    "state": {**GENERIC, "steps": 18000, "batch": 128, "noise": 0.02, "sets": (
-        "mem0.head_layers=2", "mem0.execute=20", "relative_actions=false",
-        "mem0.action_patch=3", "state_noise=0.02", 'state_noise_on=["mat_"]',
-        "grasp_pose_input=true", "layout_copies=16", "layout_shift=0.04",
-        "mem0.sample_noise=0"),
-        # observe_and_pickup's five table objects sit in slots drawn at random and match the
-        # reference by look alone: Mem-0 trains with their slots shuffled, their colours
-        # renamed and their positions also given as reach joints, the best of three probes on
-        # the validation episodes though inside their noise (docs/results/benchmark_state.md,
-        # "Recipe probes on the validation episodes")
-        "task_sets": {"observe_and_pickup": (
-            'mem0.shuffle_entities=["object"]', 'mem0.relabel_one_hots=["colour"]',
-            'mem0.reach_input=["object0","object1","object2","object3","object4"]')}},
-    # The camera table's (docs/results/benchmark_pixels.md): the same demonstrations, each
-    # with 8 rendered layout copies (the scene moved up to 4 cm), the three cameras through the
-    # frozen EfficientNet-Lite0 to stride 16 (features cached once per dataset), Mem-0's head
-    # and chunk settings, 54,000 steps at batch 128 (docs/results/pixels.md: put_back_block
-    # reached 31, 57 and 62 at 18,000, 54,000 and 90,000 steps; 54,000 is the length that
-    # fits about an hour of two cores per cell).
-    "pixels": {**GENERIC, "steps": 54000, "batch": 128, "noise": 0.02, "rendered_copies": 8,
-               "rendered_reach": 0.04, "sets": (
-        'backbone="efficientnet_lite0"', "backbone_stride=16", "mem0.head_layers=2",
-        "mem0.execute=20", "relative_actions=false", "mem0.action_patch=3",
-        "mem0.sample_noise=0")},
-}
-
-
-def add_recipe_arguments(parser, defaults: str = "generic") -> None:
-    """The command-line options of a table's recipe (``Plan``'s fields beyond its tasks and
-    columns), shared by ``rmbench table`` and benchmarks/learning.py; an option left out takes
-    its value from ``recipe_of``'s defaults (``defaults`` says which, for the help)."""
-    where = ("the --obs recipe's (rmbench.suite.plan.RECIPES)" if defaults == "recipe"
-             else "default")
-    parser.add_argument("--demos", type=int, help=f"demonstrations per task ({where}: 50)")
-    parser.add_argument("--steps", type=int, help=f"training steps ({where})")
-    parser.add_argument("--batch", type=int, help=f"training batch size ({where})")
-    parser.add_argument("--episodes", type=int, help=f"evaluation episodes per cell ({where}: 100)")
-    parser.add_argument("--noise", type=float,
-                        help=f"action noise executed during collection (DART), radians ({where})")
-    parser.add_argument("--noise-kind", choices=("white", "smooth"),
-                        help=f"({where}: white)")
-    parser.add_argument("--set", action="append", default=[], metavar="[POLICY.]FIELD=VALUE",
-                        help="override every policy config that has the field, or POLICY's "
-                             "alone (mem0.execute=20); VALUE as JSON; repeatable; added after "
-                             f"the {where.removeprefix('the ')} items")
-    parser.add_argument("--rendered-copies", type=int, metavar="N",
-                        help="train on each demonstration and N rendered copies of it with the "
-                             "scene moved (`rmbench dataset copy-layouts`; the pixel track's "
-                             "counterpart of --set layout_copies)")
-    parser.add_argument("--rendered-reach", type=float, metavar="METRES",
-                        help="with --rendered-copies: the largest move along each table axis "
-                             "(default 0.04)")
-
-
-def recipe_of(args, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
-    """``Plan``'s recipe fields from the options ``add_recipe_arguments`` added, each option
-    left out taken from ``defaults`` (``GENERIC`` unless given; ``RECIPES[obs]`` for a
-    table), its ``--set`` items after those of the defaults' that set other fields."""
-    base = GENERIC if defaults is None else defaults
-    given = {"demos": args.demos, "steps": args.steps, "batch": args.batch,
-             "episodes": args.episodes, "noise": args.noise, "noise_kind": args.noise_kind,
-             "rendered_copies": args.rendered_copies, "rendered_reach": args.rendered_reach}
-    recipe = {k: base[k] if v is None else v for k, v in given.items()}
-    # a recipe item whose field an option sets again gives way to it, so that a command that
-    # spells the whole recipe out names the folders it always named
-    mine = {_target(item) for item in args.set}
-    kept = tuple(item for item in base["sets"] if _target(item) not in mine)
-    per_task = {task: tuple(item for item in items if _target(item) not in mine)
-                for task, items in base.get("task_sets", {}).items()}
-    return {**recipe, "sets": kept + tuple(args.set),
-            "task_sets": {task: items for task, items in per_task.items() if items}}
 
 
 @dataclass(frozen=True)
@@ -352,11 +267,15 @@ class Plan:
             check_sets(items)
         for task in self.tasks:  # a config refusing a value
             for spec in {trained_spec(s) for s in self.policies}:
-                config_for(spec, self.obs, self.sets_of(task))
+                self.config(task, spec)
 
     def sets_of(self, task: str) -> tuple[str, ...]:
         """The ``--set`` items the task's cells train with: ``sets``, then its ``task_sets``."""
         return self.sets + self.task_sets.get(task, ())
+
+    def config(self, task: str, spec: str):
+        """The config the task's ``spec`` cell trains with (its trained spec's)."""
+        return config_for(trained_spec(spec), self.obs, self.sets_of(task))
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Plan:

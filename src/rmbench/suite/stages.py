@@ -26,7 +26,6 @@ from rmbench.suite.clock import DATA_WALLS, TIMING, add_time, read_json, timed
 from rmbench.suite.plan import (
     COLLECT_CAMERAS,
     Plan,
-    config_for,
     executor_spec,
     memory_of,
     parse_policy,
@@ -63,7 +62,7 @@ def layout_copy_sets(plan: Plan, task: str) -> list[tuple[int, float]]:
     ``task`` (``--set layout_copies``): solved once per dataset, by its collection."""
     sets = set()
     for spec in {trained_spec(s) for s in plan.policies}:
-        c = config_for(spec, plan.obs, plan.sets_of(task))
+        c = plan.config(task, spec)
         if c.layout_copies and c.layout_shift:
             sets.add((c.layout_copies, c.layout_shift))
     return sorted(sets)
@@ -90,7 +89,7 @@ def feature_caches(plan: Plan, out: Path, task: str) -> list[tuple[Any, tuple[li
     root = plan.train_data_dir(out, task)
     cameras: dict[tuple, set[str]] = {}  # (backbone, stride, image size) -> cameras read
     for spec in {trained_spec(s) for s in plan.policies}:
-        c = config_for(spec, plan.obs, plan.sets_of(task))
+        c = plan.config(task, spec)
         if c.reads_features:
             cameras.setdefault((c.backbone, c.backbone_stride, tuple(c.image_size)),
                                set()).update(c.cameras)
@@ -233,7 +232,7 @@ def train_stage(plan: Plan, out: Path, task: str, spec: str, progress: bool = Fa
     folder = plan.train_dir(out, task, spec)
     if not trained(plan, out, task, spec):
         spec = trained_spec(spec)
-        cfg = config_for(spec, plan.obs, plan.sets_of(task))
+        cfg = plan.config(task, spec)
         train_cfg = TrainConfig(steps=plan.steps, batch_size=plan.batch, seed=split_seed(spec)[1],
                                 save_every=min(500, plan.steps), device=plan.device)
         _, fit = trainable(parse_policy(spec)[0])
@@ -287,7 +286,7 @@ def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | No
     if result is None:
         return None
     ckpt, evals = plan.train_dir(out, task, spec), plan.eval_dir(out, task, spec)
-    cfg = config_for(trained_spec(spec), plan.obs, plan.sets_of(task))
+    cfg = plan.config(task, spec)
     return {**result_row(result, task, ckpt, evals, read_json(ckpt / TIMING, {}),
                          read_json(evals / TIMING, {})),
             "memory": memory_of(spec, get_task(task).tmc, cfg)}
