@@ -144,6 +144,15 @@ def test_task_sets_reach_their_task_alone(tmp_path):
     base = {**GENERIC, "task_sets": {"observe_and_pickup": (shuffle,)}}
     assert recipe_of(parser.parse_args([]), base)["task_sets"] == base["task_sets"]
     assert recipe_of(parser.parse_args(["--set", "mem0.shuffle_entities=[]"]), base)["task_sets"] == {}
+    # --task-set: one task's items, replacing the recipe's item for that field on that task alone
+    given = recipe_of(parser.parse_args(["--task-set", "observe_and_pickup:mem0.shuffle_entities=[]",
+                                         "--task-set", "rmbench/PutBackBlock-v1:execute=8"]), base)
+    assert given["task_sets"] == {"observe_and_pickup": ("mem0.shuffle_entities=[]",),
+                                  "put_back_block": ("execute=8",)}
+    for bad, says in (("execute=8", "TASK:"), ("no_such_task:execute=8", "no_such_task"),
+                      ("put_back_block:", "TASK:")):
+        with pytest.raises((ValueError, UnknownTaskError), match=says):
+            recipe_of(parser.parse_args(["--task-set", bad]), base)
     with pytest.raises(UnknownTaskError, match="unknown task"):
         Plan("state", tasks, policies, task_sets={"no_such_task": (shuffle,)})
     with pytest.raises(ValueError, match="FIELD=VALUE"):

@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from rmbench.suite.plan import target_of
+from rmbench.tasks import get_task
 
 # Plan's recipe fields when nothing says otherwise (benchmarks/learning.py starts from these).
 GENERIC = {"demos": 50, "steps": 3000, "batch": 32, "episodes": 100, "noise": 0.0,
@@ -65,6 +66,10 @@ def add_recipe_arguments(parser, defaults: str = "generic") -> None:
                         help="override every policy config that has the field, or POLICY's "
                              "alone (mem0.execute=20); VALUE as JSON; repeatable; added after "
                              f"the {where.removeprefix('the ')} items")
+    parser.add_argument("--task-set", action="append", default=[],
+                        metavar="TASK:[POLICY.]FIELD=VALUE",
+                        help="as --set, for TASK's cells alone (observe_and_pickup:mem0.execute=10); "
+                             "repeatable; added after that task's recipe items")
     parser.add_argument("--rendered-copies", type=int, metavar="N",
                         help="train on each demonstration and N rendered copies of it with the "
                              "scene moved (`rmbench dataset copy-layouts`; the pixel track's "
@@ -87,7 +92,25 @@ def recipe_of(args, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
     # spells the whole recipe out names the folders it always named
     mine = {target_of(item) for item in args.set}
     kept = tuple(item for item in base["sets"] if target_of(item) not in mine)
-    per_task = {task: tuple(item for item in items if target_of(item) not in mine)
-                for task, items in base.get("task_sets", {}).items()}
+    given_per_task = task_items(args.task_set)
+    per_task = {}
+    for task in dict.fromkeys([*base.get("task_sets", {}), *given_per_task]):
+        own = given_per_task.get(task, ())
+        theirs = mine | {target_of(item) for item in own}
+        per_task[task] = tuple(item for item in base.get("task_sets", {}).get(task, ())
+                               if target_of(item) not in theirs) + own
     return {**recipe, "sets": kept + tuple(args.set),
             "task_sets": {task: items for task, items in per_task.items() if items}}
+
+
+def task_items(given: list[str]) -> dict[str, tuple[str, ...]]:
+    """``--task-set`` items (``TASK:ITEM``) grouped by their task's registered name; a
+    one-line ValueError for an item without a task or a task that does not exist."""
+    out: dict[str, tuple[str, ...]] = {}
+    for text in given:
+        task, sep, item = text.partition(":")
+        if not sep or not item:
+            raise ValueError(f"--task-set wants TASK:[POLICY.]FIELD=VALUE, got {text!r}")
+        name = get_task(task.strip()).name
+        out[name] = out.get(name, ()) + (item.strip(),)
+    return out
