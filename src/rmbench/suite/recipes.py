@@ -96,16 +96,17 @@ def recipe_of(args, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
     per_task = {}
     for task in dict.fromkeys([*base.get("task_sets", {}), *given_per_task]):
         own = given_per_task.get(task, ())
-        theirs = mine | {target_of(item) for item in own}
+        replaced = mine | {target_of(item) for item in own}
         per_task[task] = tuple(item for item in base.get("task_sets", {}).get(task, ())
-                               if target_of(item) not in theirs) + own
+                               if target_of(item) not in replaced) + own
     return {**recipe, "sets": kept + tuple(args.set),
             "task_sets": {task: items for task, items in per_task.items() if items}}
 
 
 def task_items(given: list[str]) -> dict[str, tuple[str, ...]]:
-    """``--task-set`` items (``TASK:ITEM``) grouped by their task's registered name; a
-    one-line ValueError for an item without a task or a task that does not exist."""
+    """``--task-set`` items (``TASK:ITEM``, TASK a name or gym id) grouped by the task's
+    registered name: a one-line ValueError for an item without a task, UnknownTaskError for a
+    task that does not exist."""
     out: dict[str, tuple[str, ...]] = {}
     for text in given:
         task, sep, item = text.partition(":")
