@@ -219,9 +219,9 @@ def _rows(name: str, pattern: str, state_names, option: str, form: str, min_rows
     for i, entry in enumerate(state_names):
         if m := re.fullmatch(pattern, entry):
             members.setdefault(m[1], []).append((m[2], i))
-    if len(members) < min_rows or not members:
+    if len(members) < min_rows:
         raise ValueError(f"{option}: {name!r} names {len(members)} entities ({form}) in the "
-                         f"environment state; it needs {max(min_rows, 1)} or more")
+                         f"environment state; it needs {min_rows} or more")
     keys = sorted(members, key=lambda k: (len(k), k))
     rows = [members[k] for k in keys]
     if any([e for e, _ in row] != [e for e, _ in rows[0]] for row in rows):

@@ -90,17 +90,22 @@ def recipe_of(args, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
     recipe = {k: base[k] if v is None else v for k, v in given.items()}
     # a recipe item whose field an option sets again gives way to it, so that a command that
     # spells the whole recipe out names the folders it always named
-    mine = {target_of(item) for item in args.set}
-    kept = tuple(item for item in base["sets"] if target_of(item) not in mine)
-    given_per_task = task_items(args.task_set)
-    per_task = {}
-    for task in dict.fromkeys([*base.get("task_sets", {}), *given_per_task]):
-        own = given_per_task.get(task, ())
-        replaced = mine | {target_of(item) for item in own}
-        per_task[task] = tuple(item for item in base.get("task_sets", {}).get(task, ())
-                               if target_of(item) not in replaced) + own
-    return {**recipe, "sets": kept + tuple(args.set),
-            "task_sets": {task: items for task, items in per_task.items() if items}}
+    everywhere = {target_of(item) for item in args.set}
+    per_task = task_items(args.task_set)
+    task_sets = {}
+    for task in dict.fromkeys([*base.get("task_sets", {}), *per_task]):
+        own = per_task.get(task, ())
+        task_sets[task] = overridden(base.get("task_sets", {}).get(task, ()), own, everywhere)
+    return {**recipe, "sets": overridden(base["sets"], tuple(args.set)),
+            "task_sets": {task: items for task, items in task_sets.items() if items}}
+
+
+def overridden(recipe: tuple[str, ...], given: tuple[str, ...],
+               also: set = frozenset()) -> tuple[str, ...]:
+    """``recipe``'s items without those whose field ``given`` (or ``also``) sets, then
+    ``given``."""
+    replaced = set(also) | {target_of(item) for item in given}
+    return tuple(item for item in recipe if target_of(item) not in replaced) + given
 
 
 def task_items(given: list[str]) -> dict[str, tuple[str, ...]]:
