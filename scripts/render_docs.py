@@ -527,6 +527,18 @@ def pixels_failures() -> str:
     return _failures(pixel_table(), below_published=False)
 
 
+def _ending_kinds(reasons: dict[str, int]) -> dict[str, int]:
+    """Failure messages counted by kind (``failure_kind``), most frequent first."""
+    kinds: dict[str, int] = {}
+    for message, n in reasons.items():
+        kinds[failure_kind(message)] = kinds.get(failure_kind(message), 0) + n
+    return dict(sorted(kinds.items(), key=lambda kv: (-kv[1], kv[0])))
+
+
+def _endings(ends: dict[str, int]) -> str:
+    return "; ".join(f"{e} {n}" for e, n in ends.items())
+
+
 def _failures(res: dict, below_published: bool) -> str:
     rows, unkept = [], []
     for task in ordered():
@@ -535,18 +547,21 @@ def _failures(res: dict, below_published: bool) -> str:
                 100 * cell["successes"] / cell["episodes"] >= PUBLISHED["Mem-0"][task.name]):
             continue
         label = task.name + _older(task.name, "mem0", cell)
-        kept = {k: r for k, r in seed_records(cell).items() if r.get("failed_at")}
-        if not kept:
-            unkept.append(label)
-        for seed, r in kept.items():
-            for stage, ends in r["failed_at"].items():
-                rows.append([label, f"{rate(cell)} ({PUBLISHED['Mem-0'][task.name]:g})", seed,
-                             stage or "(none)", sum(ends.values()),
-                             "; ".join(f"{e} {n}" for e, n in ends.items())])
+        mem0 = f"{rate(cell)} ({PUBLISHED['Mem-0'][task.name]:g})"
+        for seed, r in seed_records(cell).items():
+            if r.get("failed_at"):
+                for stage, ends in r["failed_at"].items():
+                    rows.append([label, mem0, seed, stage or "(none)", sum(ends.values()),
+                                 _endings(ends)])
+            elif r.get("failure_reasons"):  # evaluated before the stage was kept
+                unkept += [label] if label not in unkept else []
+                ends = _ending_kinds(r["failure_reasons"])
+                rows.append([label, mem0, seed, "(not kept)", sum(ends.values()), _endings(ends)])
     table = markdown(["task", "Mem-0 (published)", "seed", "stage the episode ended in",
                       "failed episodes", "how they ended"], rows)
-    note = (f"\nNot kept for {_and(unkept)}: evaluated before the results kept where failures "
-            "end.\n") if unkept else ""
+    note = (f"\n(not kept): {_and(unkept)} evaluated before the records kept the stage a failed "
+            "episode ended in; how they ended is from the evaluation's failure messages.\n"
+            ) if unkept else ""
     return table + note + _footnote(table + note)
 
 
