@@ -112,12 +112,14 @@ def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> 
 
 def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: str,
            why: str, table: str, seed: int | None = None,
-           conditions: dict | None = None, recipe_changed: bool = False) -> dict:
+           conditions: dict | None = None, recipe_changed: bool = False,
+           train_pieces: list[dict] | None = None) -> dict:
     """``doc`` with ``run``'s cells of ``tasks`` x ``specs`` in place of its own (or, with
     ``seed``, added to its own as that training seed); ``conditions``: the fields
     ``stated_conditions`` writes into each new cell's walls' conditions (``train_note`` into
     its training's alone); ``recipe_changed``: the cells replaced were another recipe's, kept
-    under ``superseded`` whatever their data and task version."""
+    under ``superseded`` whatever their data and task version; ``train_pieces``: the
+    training's pieces (``stated_conditions``), for a training run on several machines."""
     said = dict(conditions or {})
     stages = {"train": {"note": said.pop("train_note", None)}}  # the training's wall alone
     replaced: dict[str, dict] = {}
@@ -126,7 +128,11 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
             row = run["cells"].get(task, {}).get(spec)
             if row is None:
                 raise SystemExit(f"{table}: {task} {spec} is not evaluated yet")
-            new = {"conditions": stated_conditions(spec, stages, **said),
+            try:
+                stated = stated_conditions(spec, stages, train_pieces, **said)
+            except ValueError as err:
+                raise SystemExit(str(err)) from None
+            new = {"conditions": stated,
                    **cell_record(row, task),
                    "dataset": dataset, "command": run["command"]}
             if seed is not None:
@@ -197,6 +203,11 @@ def main(argv: list[str] | None = None) -> int:
     said.add_argument("--note", metavar="TEXT", help="anything else the walls need said")
     said.add_argument("--train-note", metavar="TEXT",
                       help="what the training's wall alone needs said (it ran in pieces, ...)")
+    said.add_argument("--train-piece", metavar="JSON", action="append", type=json.loads,
+                      help="a training run in pieces, one per machine or run, in step order: "
+                           "'{\"machine\": \"h200\", \"steps\": [0, 17500], \"wall_s\": 442, "
+                           "\"jobs_beside\": 1}' (repeatable; the options above fill what a "
+                           "piece leaves unsaid)")
     args = p.parse_args(argv)
     args.out = args.out or RESULTS / f"table_{args.obs}.json"
     if args.seed is not None and args.seed < 0:
@@ -215,11 +226,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.machine is not None and args.machine not in doc.get("machines", {}):
         raise SystemExit(f"--machine {args.machine}: not one of {args.out.name}'s machines "
                          f"({', '.join(doc.get('machines', {}))})")
+    for piece in args.train_piece or []:
+        if not isinstance(piece, dict):
+            raise SystemExit(f"--train-piece {piece!r}: a JSON object of training fields")
+        if piece.get("machine") is not None and piece["machine"] not in doc.get("machines", {}):
+            raise SystemExit(f"--train-piece: machine {piece['machine']!r} is not one of "
+                             f"{args.out.name}'s machines ({', '.join(doc.get('machines', {}))})")
     doc = record(doc, run, args.tasks.split(","),
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
                  args.seed, {k: getattr(args, k) for k in (
                      "machine", "jobs_beside", "beside", "threads", "workers", "note", "train_note")},
-                 args.recipe_changed)
+                 args.recipe_changed, args.train_piece)
     write_json(args.out, doc)
     print(f"wrote {args.out}")
     return 0

@@ -279,3 +279,21 @@ def test_an_unknown_machine_is_a_one_line_error(table_state, tmp_path):
     with pytest.raises(SystemExit, match="--machine tpu: not one of table_state.json's machines"):
         table_state.main(["--table", str(folder), "--tasks", "press_button", "--specs", "mem0",
                           "--dataset", "rmbench/2", "--out", str(out), "--machine", "tpu"])
+
+
+def test_a_training_run_in_pieces_keeps_each_piece(table_state):
+    gpu = {"machine": "h200", "steps": [0, 17500], "wall_s": 442.3, "jobs_beside": 1}
+    cpu = {"machine": "cpu", "steps": [17500, 18000], "wall_s": 519.6}
+    doc = table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", "x", "t",
+                             conditions={"jobs_beside": 3, "workers": 1}, train_pieces=[gpu, cpu])
+    train, (ev,) = (doc["cells"]["press_button"]["mem0"]["conditions"][k] for k in ("train", "eval"))
+    assert [(p["machine"], p["steps"], p["wall_s"]) for p in train] == [
+        ("h200", [0, 17500], 442.3), ("cpu", [17500, 18000], 519.6)]
+    # a piece's own field stands; the options fill only what it leaves unsaid
+    assert [p["jobs_beside"] for p in train] == [1, 3] and ev["jobs_beside"] == 3
+    with pytest.raises(SystemExit, match="do not follow one another"):
+        table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", "x", "t",
+                           train_pieces=[gpu, {**cpu, "steps": [17000, 18000]}])
+    with pytest.raises(SystemExit, match="training piece 0: no field gpu"):
+        table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", "x", "t",
+                           train_pieces=[{**gpu, "gpu": "H200"}])

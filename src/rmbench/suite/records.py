@@ -15,6 +15,7 @@ then."""
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 from typing import Any
@@ -47,12 +48,16 @@ def unstated_conditions(spec: str) -> dict[str, list[dict[str, None]]]:
 
 
 def stated_conditions(spec: str, stages: dict[str, dict[str, Any]] | None = None,
+                      train_pieces: list[dict[str, Any]] | None = None,
                       **fields: Any) -> dict[str, list[dict[str, Any]]]:
     """``unstated_conditions(spec)`` with ``fields`` (``machine``, ``jobs_beside``,
     ``beside``, ``note``, ``threads`` for a training, ``workers`` for an evaluation) written
     into each stage's one piece where the stage has that field, then ``stages``' fields into
     the named stage's alone (``{"train": {"note": ...}}``: what only the training needs
-    said); a field given as None stays unstated. An unknown field or stage is a ValueError."""
+    said); a field given as None stays unstated. ``train_pieces``: a training that ran in
+    pieces (on a GPU, then resumed on a CPU), one dict of training fields each, in step
+    order; they replace the training's one piece, and ``fields`` fill only what a piece
+    leaves unsaid. An unknown field or stage is a ValueError."""
     stages = stages or {}
     known = set(TRAIN_CONDITIONS) | set(EVAL_CONDITIONS)
     unknown = sorted(set(fields).union(*stages.values()) - known)
@@ -66,6 +71,29 @@ def stated_conditions(spec: str, stages: dict[str, dict[str, Any]] | None = None
         for piece in pieces:
             for said in (fields, stages.get(stage, {})):
                 piece.update({k: v for k, v in said.items() if k in piece and v is not None})
+    if train_pieces:
+        out["train"] = [_training_piece(p, {**fields, **stages.get("train", {})}, i)
+                        for i, p in enumerate(train_pieces)]
+        ends = [p["steps"] for p in out["train"]]
+        if any(a[1] != b[0] for a, b in itertools.pairwise(ends)):
+            raise ValueError(f"training pieces' steps {ends} do not follow one another")
+    return out
+
+
+def _training_piece(piece: dict[str, Any], said: dict[str, Any], i: int) -> dict[str, Any]:
+    """One piece of a training run in pieces: its own fields, then ``said`` where it is silent;
+    ``steps`` [from, to] required."""
+    unknown = sorted(set(piece) - set(TRAIN_CONDITIONS))
+    if unknown:
+        raise ValueError(f"training piece {i}: no field {', '.join(unknown)}; fields: "
+                         f"{', '.join(TRAIN_CONDITIONS)}")
+    steps = piece.get("steps")
+    if not (isinstance(steps, list) and len(steps) == 2 and 0 <= steps[0] < steps[1]):
+        raise ValueError(f"training piece {i}: steps must be [from, to] with from < to, got "
+                         f"{steps!r}")
+    out = dict.fromkeys(TRAIN_CONDITIONS)
+    out.update({k: v for k, v in said.items() if k in out and v is not None})
+    out.update({k: v for k, v in piece.items() if v is not None})
     return out
 
 
