@@ -282,6 +282,8 @@ def test_an_unknown_machine_is_a_one_line_error(table_state, tmp_path):
 
 
 def test_a_training_run_in_pieces_keeps_each_piece(table_state):
+    from rmbench.suite.records import stated_conditions
+
     gpu = {"machine": "h200", "steps": [0, 17500], "wall_s": 442.3, "jobs_beside": 1}
     cpu = {"machine": "cpu", "steps": [17500, 18000], "wall_s": 519.6}
     doc = table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", "x", "t",
@@ -297,3 +299,5 @@ def test_a_training_run_in_pieces_keeps_each_piece(table_state):
     with pytest.raises(SystemExit, match="training piece 0: no field gpu"):
         table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", "x", "t",
                            train_pieces=[{**gpu, "gpu": "H200"}])
+    with pytest.raises(ValueError, match="trains nothing of its own"):
+        stated_conditions("mem0:gt_classifier", train_pieces=[gpu])

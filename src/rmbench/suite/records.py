@@ -72,6 +72,8 @@ def stated_conditions(spec: str, stages: dict[str, dict[str, Any]] | None = None
             for said in (fields, stages.get(stage, {})):
                 piece.update({k: v for k, v in said.items() if k in piece and v is not None})
     if train_pieces:
+        if not out["train"]:
+            raise ValueError(f"{spec} trains nothing of its own: it has no training pieces")
         out["train"] = [_training_piece(p, {**fields, **stages.get("train", {})}, i)
                         for i, p in enumerate(train_pieces)]
         ends = [p["steps"] for p in out["train"]]
