@@ -32,7 +32,8 @@ and chance levels, and no cells yet.
 A recorded cell keeps the command that made it, the dataset format it trained on and its
 walls' ``conditions`` (``suite/records.py``): what ``--machine``, ``--jobs-beside``,
 ``--beside``, ``--threads``, ``--workers``, ``--note`` and ``--train-note`` say, every other
-field null. The file is written atomically.
+field null; a training run in pieces on several machines (a GPU, then a CPU) states each
+with ``--train-piece``, one cell at a time. The file is written atomically.
 
     python benchmarks/table_state.py --table runs/table_state --tasks battery_try \
         --specs mem0 --seed 1 --dataset rmbench/2 --machine cpu --threads 1 --workers 1 \
@@ -174,6 +175,17 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
     return doc
 
 
+def _train_piece(text: str) -> dict:
+    """``--train-piece``'s value: a JSON object (its fields are checked when it is recorded)."""
+    try:
+        piece = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise argparse.ArgumentTypeError(f"not JSON ({err}): {text}") from None
+    if not isinstance(piece, dict):
+        raise argparse.ArgumentTypeError(f"not a JSON object of training fields: {text}")
+    return piece
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     source = p.add_mutually_exclusive_group(required=True)
@@ -203,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     said.add_argument("--note", metavar="TEXT", help="anything else the walls need said")
     said.add_argument("--train-note", metavar="TEXT",
                       help="what the training's wall alone needs said (it ran in pieces, ...)")
-    said.add_argument("--train-piece", metavar="JSON", action="append", type=json.loads,
+    said.add_argument("--train-piece", metavar="JSON", action="append", type=_train_piece,
                       help="a training run in pieces, one per machine or run, in step order: "
                            "'{\"machine\": \"h200\", \"steps\": [0, 17500], \"wall_s\": 442, "
                            "\"jobs_beside\": 1}' (repeatable; the options above fill what a "
@@ -226,9 +238,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.machine is not None and args.machine not in doc.get("machines", {}):
         raise SystemExit(f"--machine {args.machine}: not one of {args.out.name}'s machines "
                          f"({', '.join(doc.get('machines', {}))})")
+    if args.train_piece and len(args.tasks.split(",")) * len(args.specs.split(",")) > 1:
+        raise SystemExit("--train-piece states one training's pieces: record one task and "
+                         "one spec at a time")
     for piece in args.train_piece or []:
-        if not isinstance(piece, dict):
-            raise SystemExit(f"--train-piece {piece!r}: a JSON object of training fields")
         if piece.get("machine") is not None and piece["machine"] not in doc.get("machines", {}):
             raise SystemExit(f"--train-piece: machine {piece['machine']!r} is not one of "
                              f"{args.out.name}'s machines ({', '.join(doc.get('machines', {}))})")

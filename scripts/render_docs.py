@@ -21,6 +21,7 @@ import argparse
 import json
 import re
 import sys
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
@@ -529,9 +530,9 @@ def pixels_failures() -> str:
 
 def _ending_kinds(reasons: dict[str, int]) -> dict[str, int]:
     """Failure messages counted by kind (``failure_kind``), most frequent first."""
-    kinds: dict[str, int] = {}
+    kinds: Counter[str] = Counter()
     for message, n in reasons.items():
-        kinds[failure_kind(message)] = kinds.get(failure_kind(message), 0) + n
+        kinds[failure_kind(message)] += n
     return dict(sorted(kinds.items(), key=lambda kv: (-kv[1], kv[0])))
 
 
@@ -549,19 +550,21 @@ def _failures(res: dict, below_published: bool) -> str:
         label = task.name + _older(task.name, "mem0", cell)
         mem0 = f"{rate(cell)} ({PUBLISHED['Mem-0'][task.name]:g})"
         for seed, r in seed_records(cell).items():
-            if r.get("failed_at"):
+            if "failed_at" in r:  # ({} where every episode succeeded)
                 for stage, ends in r["failed_at"].items():
                     rows.append([label, mem0, seed, stage or "(none)", sum(ends.values()),
                                  _endings(ends)])
-            elif r.get("failure_reasons"):  # evaluated before the stage was kept
-                unkept += [label] if label not in unkept else []
+                continue
+            if label not in unkept:  # evaluated before the records kept the stage
+                unkept.append(label)
+            if r.get("failure_reasons"):
                 ends = _ending_kinds(r["failure_reasons"])
                 rows.append([label, mem0, seed, "(not kept)", sum(ends.values()), _endings(ends)])
     table = markdown(["task", "Mem-0 (published)", "seed", "stage the episode ended in",
                       "failed episodes", "how they ended"], rows)
     note = (f"\n(not kept): {_and(unkept)} evaluated before the records kept the stage a failed "
-            "episode ended in; how they ended is from the evaluation's failure messages.\n"
-            ) if unkept else ""
+            "episode ended in; how they ended is from the evaluation's failure messages where "
+            "they are kept.\n") if unkept else ""
     return table + note + _footnote(table + note)
 
 

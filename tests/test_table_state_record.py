@@ -301,3 +301,18 @@ def test_a_training_run_in_pieces_keeps_each_piece(table_state):
                            train_pieces=[{**gpu, "gpu": "H200"}])
     with pytest.raises(ValueError, match="trains nothing of its own"):
         stated_conditions("mem0:gt_classifier", train_pieces=[gpu])
+    # a --note reaches every piece that leaves it unsaid; steps that are not whole numbers
+    # are a one-line error, not a traceback
+    stated = stated_conditions("mem0", {"train": {"note": None}}, [gpu, cpu], note="in two runs")
+    assert [p["note"] for p in stated["train"]] == ["in two runs", "in two runs"]
+    with pytest.raises(ValueError, match=r"training piece 1: steps must be \[from, to\]"):
+        stated_conditions("mem0", train_pieces=[gpu, {**cpu, "steps": ["17500", None]}])
+
+
+def test_a_training_piece_on_the_command_line_is_a_json_object(table_state, tmp_path):
+    with pytest.raises(SystemExit):
+        table_state.main(["--table", str(tmp_path), "--tasks", "press_button", "--specs", "mem0",
+                          "--dataset", "rmbench/2", "--train-piece", "[0, 17500]"])
+    assert table_state._train_piece('{"steps": [0, 10]}') == {"steps": [0, 10]}
+    with pytest.raises(Exception, match="not JSON"):
+        table_state._train_piece("{steps: [0, 10]}")

@@ -260,10 +260,9 @@ def add_parsers(sub) -> None:
                         "resumes on a CPU; collection and evaluation stay on the CPU)")
     p.add_argument("--out", default=None, help="the table's folder (default runs/table_<obs>)")
     p.add_argument("--jobs", type=int, default=1,
-                   help="jobs at once (local: each a process with cores/jobs torch threads, "
-                        "the cores this process may use: on a machine shared with other work, "
-                        "start the table under taskset so that its threads do not outnumber "
-                        "the cores left to it)")
+                   help="jobs at once (local: each a process with (usable cores) / --jobs "
+                        "torch threads, usable being this process's affinity; on a shared "
+                        "machine start the table under taskset -c)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="ray: jobs on a Ray cluster (RAY_ADDRESS); --out on a shared file system")
     p.add_argument("--report-only", action="store_true",

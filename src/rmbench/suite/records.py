@@ -74,8 +74,8 @@ def stated_conditions(spec: str, stages: dict[str, dict[str, Any]] | None = None
     if train_pieces:
         if not out["train"]:
             raise ValueError(f"{spec} trains nothing of its own: it has no training pieces")
-        out["train"] = [_training_piece(p, {**fields, **stages.get("train", {})}, i)
-                        for i, p in enumerate(train_pieces)]
+        said = {**fields, **{k: v for k, v in stages.get("train", {}).items() if v is not None}}
+        out["train"] = [_training_piece(p, said, i) for i, p in enumerate(train_pieces)]
         ends = [p["steps"] for p in out["train"]]
         if any(a[1] != b[0] for a, b in itertools.pairwise(ends)):
             raise ValueError(f"training pieces' steps {ends} do not follow one another")
@@ -90,7 +90,9 @@ def _training_piece(piece: dict[str, Any], said: dict[str, Any], i: int) -> dict
         raise ValueError(f"training piece {i}: no field {', '.join(unknown)}; fields: "
                          f"{', '.join(TRAIN_CONDITIONS)}")
     steps = piece.get("steps")
-    if not (isinstance(steps, list) and len(steps) == 2 and 0 <= steps[0] < steps[1]):
+    whole = isinstance(steps, list) and len(steps) == 2 and all(
+        isinstance(n, int) and not isinstance(n, bool) for n in steps)
+    if not (whole and 0 <= steps[0] < steps[1]):
         raise ValueError(f"training piece {i}: steps must be [from, to] with from < to, got "
                          f"{steps!r}")
     out = dict.fromkeys(TRAIN_CONDITIONS)
