@@ -235,16 +235,19 @@ def main(argv: list[str] | None = None) -> int:
     if not args.out.exists() and args.obs == "state":
         raise SystemExit(f"{args.out}: no such results file")
     doc = json.loads(args.out.read_text()) if args.out.exists() else new_table(run)
-    if args.machine is not None and args.machine not in doc.get("machines", {}):
-        raise SystemExit(f"--machine {args.machine}: not one of {args.out.name}'s machines "
-                         f"({', '.join(doc.get('machines', {}))})")
+    known = doc.get("machines", {})
+
+    def check_machine(name: str | None, flag: str) -> None:
+        if name is not None and name not in known:
+            raise SystemExit(f"{flag}: machine {name!r} is not one of {args.out.name}'s "
+                             f"machines ({', '.join(known)})")
+
+    check_machine(args.machine, "--machine")
     if args.train_piece and len(args.tasks.split(",")) * len(args.specs.split(",")) > 1:
         raise SystemExit("--train-piece states one training's pieces: record one task and "
                          "one spec at a time")
     for piece in args.train_piece or []:
-        if piece.get("machine") is not None and piece["machine"] not in doc.get("machines", {}):
-            raise SystemExit(f"--train-piece: machine {piece['machine']!r} is not one of "
-                             f"{args.out.name}'s machines ({', '.join(doc.get('machines', {}))})")
+        check_machine(piece.get("machine"), "--train-piece")
     doc = record(doc, run, args.tasks.split(","),
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
                  args.seed, {k: getattr(args, k) for k in (

@@ -916,11 +916,9 @@ def robustness_failures() -> str:
             c = cells.get((task.name, kind, sigma))
             if c is None or not c["failures"]:
                 continue
-            merged: dict[str, int] = {}
-            for reason, n in c["failures"].items():
-                how = failure_kind(reason)  # coordinates make every reason unique
-                merged[how] = merged.get(how, 0) + n
-            ends = "; ".join(f"{r} ({n})" for r, n in sorted(merged.items(), key=lambda x: -x[1])[:4])
+            # by kind: the coordinates in a failure message make every message unique
+            merged = list(_ending_kinds(c["failures"]).items())
+            ends = "; ".join(f"{r} ({n})" for r, n in merged[:4])
             lines.append(f"- {task.name}, {kind} {sigma:g}: {ends}")
     return "\n".join(lines) + "\n"
 

@@ -276,7 +276,7 @@ def test_an_unknown_machine_is_a_one_line_error(table_state, tmp_path):
     folder = tmp_path / "run"
     folder.mkdir()
     (folder / "table.json").write_text(json.dumps(_run()))
-    with pytest.raises(SystemExit, match="--machine tpu: not one of table_state.json's machines"):
+    with pytest.raises(SystemExit, match="--machine: machine 'tpu' is not one of table_state.json"):
         table_state.main(["--table", str(folder), "--tasks", "press_button", "--specs", "mem0",
                           "--dataset", "rmbench/2", "--out", str(out), "--machine", "tpu"])
 
