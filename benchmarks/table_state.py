@@ -31,9 +31,9 @@ and chance levels, and no cells yet.
 
 A recorded cell keeps the command that made it, the dataset format it trained on and its
 walls' ``conditions`` (``suite/records.py``): what ``--machine``, ``--jobs-beside``,
-``--beside``, ``--threads``, ``--workers``, ``--note`` and ``--train-note`` say, every other
-field null; a training run in pieces on several machines (a GPU, then a CPU) states each
-with ``--train-piece``, one cell at a time. The file is written atomically.
+``--beside``, ``--threads``, ``--workers``, ``--note``, ``--train-note`` and ``--eval-note``
+say, every other field null; a training run in pieces on several machines (a GPU, then a
+CPU) states each with ``--train-piece``, one cell at a time. The file is written atomically.
 
     python benchmarks/table_state.py --table runs/table_state --tasks battery_try \
         --specs mem0 --seed 1 --dataset rmbench/2 --machine cpu --threads 1 --workers 1 \
@@ -117,12 +117,15 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
            train_pieces: list[dict] | None = None) -> dict:
     """``doc`` with ``run``'s cells of ``tasks`` x ``specs`` in place of its own (or, with
     ``seed``, added to its own as that training seed); ``conditions``: the fields
-    ``stated_conditions`` writes into each new cell's walls' conditions (``train_note`` into
-    its training's alone); ``recipe_changed``: the cells replaced were another recipe's, kept
-    under ``superseded`` whatever their data and task version; ``train_pieces``: the
-    training's pieces (``stated_conditions``), for a training run on several machines."""
+    ``stated_conditions`` writes into each new cell's walls' conditions (``train_note`` and
+    ``eval_note`` into its training's or its evaluation's alone); ``recipe_changed``: the
+    cells replaced were another recipe's, kept under ``superseded`` whatever their data and
+    task version; ``train_pieces``: the training's pieces (``stated_conditions``), for a
+    training run on several machines."""
     said = dict(conditions or {})
-    stages = {"train": {"note": said.pop("train_note", None)}}  # the training's wall alone
+    # what one stage's wall alone needs said
+    stages = {"train": {"note": said.pop("train_note", None)},
+              "eval": {"note": said.pop("eval_note", None)}}
     replaced: dict[str, dict] = {}
     for task in tasks:
         for spec in specs:
@@ -215,6 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     said.add_argument("--note", metavar="TEXT", help="anything else the walls need said")
     said.add_argument("--train-note", metavar="TEXT",
                       help="what the training's wall alone needs said (it ran in pieces, ...)")
+    said.add_argument("--eval-note", metavar="TEXT",
+                      help="what the evaluation's wall alone needs said (it was resumed, ...)")
     said.add_argument("--train-piece", metavar="JSON", action="append", type=_train_piece,
                       help="a training run in pieces, one per machine or run, in step order: "
                            "'{\"machine\": \"h200\", \"steps\": [0, 17500], \"wall_s\": 442, "
@@ -251,7 +256,8 @@ def main(argv: list[str] | None = None) -> int:
     doc = record(doc, run, args.tasks.split(","),
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
                  args.seed, {k: getattr(args, k) for k in (
-                     "machine", "jobs_beside", "beside", "threads", "workers", "note", "train_note")},
+                     "machine", "jobs_beside", "beside", "threads", "workers", "note",
+                     "train_note", "eval_note")},
                  args.recipe_changed, args.train_piece)
     write_json(args.out, doc)
     print(f"wrote {args.out}")

@@ -368,6 +368,12 @@ def pixels_cost() -> str:
                      f"{sum(spent) / 3600:.1f}"])
         if w.get("note"):
             notes.append(f"{task.name}: {w['note']}")
+        # a wall that is not the whole stage's (a resumed evaluation, ...) says so
+        for s, c in cells.items():
+            for stage, what in (("train", "training"), ("eval", "evaluation")):
+                for piece in (c.get("conditions") or {}).get(stage, []):
+                    if piece.get("note"):
+                        notes.append(f"{task.name}, {COLUMN[s]}'s {what}: {piece['note']}")
     table = markdown(["task", "demonstrations", "rendered copies", "cached features", "training",
                       "evaluation", "core-hours so far"], rows) if rows else "No row measured yet.\n"
     return table + "".join(f"\n{n}\n" for n in notes)
