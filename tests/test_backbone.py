@@ -92,6 +92,18 @@ def test_the_cache_is_written_once_and_reused(dataset, tmp_path, counted, monkey
     assert sorted((tmp_path / "features").rglob("*.npy")) == files  # no temporary left
 
 
+def test_workers_write_the_features_one_process_writes(dataset, tmp_path):
+    ds = Dataset(dataset)
+    pairs = [(e, c) for e in range(ds.num_episodes) for c in CAMERAS]
+    one, two = cache_of(ds, tmp_path / "one"), cache_of(ds, tmp_path / "two")
+    assert one.encode(pairs) == two.encode(pairs, workers=2) == len(pairs)
+    for e, c in pairs:  # bit for bit: each worker runs the same batches on one thread
+        assert two.path(e, c).read_bytes() == one.path(e, c).read_bytes()
+    assert sorted(p.name for p in (tmp_path / "two").rglob("*")) == sorted(
+        p.name for p in (tmp_path / "one").rglob("*"))  # no temporary left
+    assert two.missing(list(range(ds.num_episodes)), CAMERAS) == []
+
+
 def test_a_stale_or_damaged_cache_file_is_encoded_again(dataset, tmp_path, counted):
     import os
 

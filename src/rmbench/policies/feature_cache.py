@@ -9,7 +9,9 @@ features-v<FEATURES_VERSION>-<backbone>-s<stride>-<W>x<H>/<camera>/``. The frame
 hold: a file is written under a temporary name and renamed into place, and its name carries the
 video file's size and modification time, so a dataset collected anew into the same folder is
 encoded anew. A file that does not read back as the array its name promises (cut short, another
-shape) is encoded again.
+shape) is encoded again. Worker processes may encode different files side by side
+(``encode(..., workers=N)``): each runs the same batches on its share of the cores and writes
+the bytes one process would.
 
 No colour jitter: jittered frames would need a backbone pass per training step (or K encoded
 variants of every frame, K times the encoding and the disk), which is what the cache removes;
@@ -102,12 +104,29 @@ class FeatureCache:
         episode videos it encoded."""
         return self.encode(self.missing(episodes, cameras))
 
-    def encode(self, todo: list[tuple[int, str]]) -> int:
-        """Encode the (episode, camera) pairs ``todo`` (``missing``'s answer); how many."""
+    def encode(self, todo: list[tuple[int, str]], workers: int = 1) -> int:
+        """Encode the (episode, camera) pairs ``todo`` (``missing``'s answer), in ``workers``
+        processes (each writes its own files, atomically); how many."""
+        if workers > 1 and len(todo) > 1:
+            return self._encode_parallel(todo, min(workers, len(todo)))
         for n, (e, c) in enumerate(todo):
             if n % 20 == 0:
                 log.info("%s: encoding %d of %d episode videos", self.dir, n + 1, len(todo))
             self._ensure(e, c)
+        return len(todo)
+
+    def _encode_parallel(self, todo: list[tuple[int, str]], workers: int) -> int:
+        from rmbench.parallel import in_order, make_executor
+
+        executor = make_executor(workers)
+        where = (str(self.ds.root), self.backbone, self.stride, self.size, str(self.dir))
+        try:
+            for n, _ in enumerate(in_order(executor, ((pair, _encode_pair, (*where, *pair))
+                                                      for pair in todo))):
+                if n % 20 == 0:
+                    log.info("%s: encoded %d of %d episode videos", self.dir, n + 1, len(todo))
+        finally:
+            executor.shutdown()
         return len(todo)
 
     def _ensure(self, episode: int, camera: str) -> np.ndarray:
@@ -143,6 +162,21 @@ class FeatureCache:
             images = torch.from_numpy(np.array(frames[i:i + ENCODE_BATCH])).permute(0, 3, 1, 2)
             out[i:i + ENCODE_BATCH] = backbone_features(self.backbone, self.stride, images).numpy()
         save_atomic(path, out)
+
+
+# One cache per worker process, kept across its jobs (the dataset's metadata is read once).
+_WORKER_CACHE: FeatureCache | None = None
+
+
+def _encode_pair(root: str, backbone: str, stride: int, size: tuple[int, int], cache_dir: str,
+                 episode: int, camera: str) -> None:
+    """A worker's job: one (episode, camera) of the cache at ``cache_dir`` encoded and written."""
+    global _WORKER_CACHE
+    c = _WORKER_CACHE
+    if c is None or (str(c.ds.root), c.backbone, c.stride, c.size, str(c.dir)) != (
+            root, backbone, stride, tuple(size), cache_dir):
+        c = _WORKER_CACHE = FeatureCache(Dataset(root), backbone, stride, size, cache_dir)
+    c._ensure(episode, camera)
 
 
 class FeatureFrames(torch.utils.data.Dataset):

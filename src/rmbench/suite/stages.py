@@ -208,7 +208,7 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
         todo = cache.missing(*wanted)  # (reads every file's header: once)
         if todo:
             with timed(root.parent, "features_wall_s"):
-                cache.encode(todo)
+                cache.encode(todo, workers)
     data = plan.train_data_dir(out, task)
     for n, reach in layout_copy_sets(plan, task):
         if not layout_copies_cached(data, n, reach, COPIES_SEED):
