@@ -10,7 +10,7 @@ hold: a file is written under a temporary name and renamed into place, and its n
 video file's size and modification time, so a dataset collected anew into the same folder is
 encoded anew. A file that does not read back as the array its name promises (cut short, another
 shape) is encoded again. Worker processes may encode different files side by side
-(``encode(..., workers=N)``): each runs the same batches on its share of the cores and writes
+(``encode(..., workers=N)``): each runs the same batches on one thread and writes
 the bytes one process would.
 
 No colour jitter: jittered frames would need a backbone pass per training step (or K encoded
@@ -30,6 +30,7 @@ import torch
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, FrameCache, cache_file, save_atomic
 from rmbench.policies.nn.backbone import FEATURE_DTYPE, backbone_features, feature_shape
+from rmbench.policies.nn.inference import INFERENCE_THREADS, intra_op_threads
 
 log = logging.getLogger(__name__)
 
@@ -158,9 +159,15 @@ class FeatureCache:
     def _encode(self, episode: int, camera: str, path: Path) -> None:
         frames = FrameCache(self.ds, self.size).read_once(episode, camera)
         out = np.empty((len(frames), *self.shape), dtype=STORED)
-        for i in range(0, len(frames), ENCODE_BATCH):
-            images = torch.from_numpy(np.array(frames[i:i + ENCODE_BATCH])).permute(0, 3, 1, 2)
-            out[i:i + ENCODE_BATCH] = backbone_features(self.backbone, self.stride, images).numpy()
+        # One thread, as the closed loop encodes its frames (``nn.inference``): batches this
+        # small gain little from more, and more beside other busy processes (or another
+        # worker's video decoding) cost 18 times the time where measured (2 threads beside two
+        # jobs on 2 cores: 43 s an episode's camera against 2.4 s).
+        with intra_op_threads(INFERENCE_THREADS):
+            for i in range(0, len(frames), ENCODE_BATCH):
+                images = torch.from_numpy(np.array(frames[i:i + ENCODE_BATCH])).permute(0, 3, 1, 2)
+                out[i:i + ENCODE_BATCH] = backbone_features(self.backbone, self.stride,
+                                                            images).numpy()
         save_atomic(path, out)
 
 

@@ -10,8 +10,9 @@ of the calling process (a training run's, say) is restored on return.
 
 from __future__ import annotations
 
+import contextlib
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TypeVar
 
 import torch
@@ -23,6 +24,17 @@ INFERENCE_THREADS = 1
 F = TypeVar("F", bound=Callable)
 
 
+@contextlib.contextmanager
+def intra_op_threads(n: int) -> Iterator[None]:
+    """torch's intra-op threads set to ``n`` inside, the caller's restored on exit."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
 def inference(fn: F) -> F:
     """Run ``fn`` under ``torch.no_grad`` with ``INFERENCE_THREADS`` intra-op threads and
     subnormals read as zero (``training.device.flush_denormals``: as in training, and several
@@ -30,13 +42,8 @@ def inference(fn: F) -> F:
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        threads = torch.get_num_threads()
-        torch.set_num_threads(INFERENCE_THREADS)
         flush_denormals()  # (left on: torch has no getter for the setting to restore)
-        try:
-            with torch.no_grad():
-                return fn(*args, **kwargs)
-        finally:
-            torch.set_num_threads(threads)
+        with intra_op_threads(INFERENCE_THREADS), torch.no_grad():
+            return fn(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
