@@ -529,6 +529,26 @@ def state_failures() -> str:
     return _failures(load("table_state.json"), below_published=True)
 
 
+def reference_reproductions() -> str:
+    """The published Mem-0 beside users' reproductions of it with the reference code and
+    rmbench's Mem-0 (state, pooled over its seeds; cameras where measured), on the rows a
+    reproduction reports."""
+    doc = load("reference_reproductions.json")
+    state, pixels = load("table_state.json")["cells"], pixel_table()["cells"]
+    rows = []
+    for report in doc["reports"]:
+        for task in ordered():
+            if task.name not in report["rates"]:
+                continue
+            cam = pixels.get(task.name, {}).get("mem0")
+            rows.append([task.name, f"{PUBLISHED['Mem-0'][task.name]:g}",
+                         f"{report['rates'][task.name]:g}", rate(state[task.name]["mem0"]),
+                         rate(cam) if cam else "—", f"[{report['date']}]({report['source']})"])
+    return markdown(["task", "Mem-0 (published, cameras)", "reproduced with the reference code "
+                     "(cameras)", "rmbench Mem-0 (state)", "rmbench Mem-0 (cameras)", "report"],
+                    rows)
+
+
 def pixels_failures() -> str:
     """Every measured camera row: where Mem-0's failed episodes end."""
     return _failures(pixel_table(), below_published=False)
@@ -1079,6 +1099,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "put-back-loops": put_back_loops,
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds, "state-failures": state_failures,
+    "reference-reproductions": reference_reproductions,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,
     "state-records": state_records, "state-hardware": state_hardware,
     "state-superseded": state_superseded, "state-cost": state_cost, "eval-walls": eval_walls,
