@@ -368,12 +368,15 @@ def pixels_cost() -> str:
                      f"{sum(spent) / 3600:.1f}"])
         if w.get("note"):
             notes.append(f"{task.name}: {w['note']}")
-        # a wall that is not the whole stage's (a resumed evaluation, ...) says so
+        # what a cell's record says of its walls (a resumed evaluation, pieces, ...), once
         for s, c in cells.items():
-            for stage, what in (("train", "training"), ("eval", "evaluation")):
-                for piece in (c.get("conditions") or {}).get(stage, []):
-                    if piece.get("note"):
-                        notes.append(f"{task.name}, {COLUMN[s]}'s {what}: {piece['note']}")
+            said = {what: [p["note"] for p in (c.get("conditions") or {}).get(stage, [])
+                           if p.get("note")]
+                    for stage, what in (("train", "training"), ("eval", "evaluation"))}
+            if said["training"] and said["training"] == said["evaluation"]:
+                said = {"walls": said["training"]}
+            notes += [f"{task.name}, {COLUMN[s]}'s {what}: {n}"
+                      for what, ns in said.items() for n in ns]
     table = markdown(["task", "demonstrations", "rendered copies", "cached features", "training",
                       "evaluation", "core-hours so far"], rows) if rows else "No row measured yet.\n"
     return table + "".join(f"\n{n}\n" for n in notes)

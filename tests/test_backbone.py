@@ -92,16 +92,35 @@ def test_the_cache_is_written_once_and_reused(dataset, tmp_path, counted, monkey
     assert sorted((tmp_path / "features").rglob("*.npy")) == files  # no temporary left
 
 
-def test_workers_write_the_features_one_process_writes(dataset, tmp_path):
+def test_workers_write_the_features_one_process_writes(dataset, tmp_path, counted):
     ds = Dataset(dataset)
     pairs = [(e, c) for e in range(ds.num_episodes) for c in CAMERAS]
     one, two = cache_of(ds, tmp_path / "one"), cache_of(ds, tmp_path / "two")
-    assert one.encode(pairs) == two.encode(pairs, workers=2) == len(pairs)
+    assert one.encode(pairs) == len(pairs)
+    n = len(counted)
+    assert two.encode(pairs, workers=2) == len(pairs)
+    assert len(counted) == n  # the workers encoded them, not this process
     for e, c in pairs:  # bit for bit: each worker runs the same batches on one thread
         assert two.path(e, c).read_bytes() == one.path(e, c).read_bytes()
     assert sorted(p.name for p in (tmp_path / "two").rglob("*")) == sorted(
         p.name for p in (tmp_path / "one").rglob("*"))  # no temporary left
     assert two.missing(list(range(ds.num_episodes)), CAMERAS) == []
+
+
+def test_features_are_encoded_on_one_thread_whatever_the_callers(dataset, tmp_path,
+                                                                 monkeypatch):
+    seen = []
+    run = feature_cache.backbone_features
+
+    def threads_seen(name, stride, images):
+        seen.append(torch.get_num_threads())
+        return run(name, stride, images)
+
+    monkeypatch.setattr(feature_cache, "backbone_features", threads_seen)
+    torch.set_num_threads(2)  # (the autouse fixture restores the test's own)
+    cache_of(Dataset(dataset), tmp_path / "features").encode([(0, "head")])
+    assert seen and set(seen) == {1}
+    assert torch.get_num_threads() == 2  # the caller's, restored
 
 
 def test_a_stale_or_damaged_cache_file_is_encoded_again(dataset, tmp_path, counted):

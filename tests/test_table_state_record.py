@@ -282,9 +282,18 @@ def test_an_unknown_machine_is_a_one_line_error(table_state, tmp_path):
     folder = tmp_path / "run"
     folder.mkdir()
     (folder / "table.json").write_text(json.dumps(_run()))
+    args = ["--table", str(folder), "--tasks", "press_button", "--specs", "mem0",
+            "--dataset", "rmbench/2", "--out", str(out)]
     with pytest.raises(SystemExit, match="--machine: machine 'tpu' is not one of table_state.json"):
-        table_state.main(["--table", str(folder), "--tasks", "press_button", "--specs", "mem0",
-                          "--dataset", "rmbench/2", "--out", str(out), "--machine", "tpu"])
+        table_state.main([*args, "--machine", "tpu"])
+    with pytest.raises(SystemExit, match="--train-piece: machine 'tpu' is not one of"):
+        table_state.main([*args, "--train-piece", '{"machine": "tpu", "steps": [0, 10]}'])
+    # known machines pass, and --eval-note reaches the evaluation's wall alone
+    assert table_state.main([*args, "--machine", "cpu", "--eval-note", "resumed",
+                             "--why", "format 1"]) == 0
+    cell = json.loads(out.read_text())["cells"]["press_button"]["mem0"]["conditions"]
+    assert (cell["train"][0]["note"], cell["eval"][0]["note"]) == (None, "resumed")
+    assert cell["train"][0]["machine"] == cell["eval"][0]["machine"] == "cpu"
 
 
 def test_a_training_run_in_pieces_keeps_each_piece(table_state):

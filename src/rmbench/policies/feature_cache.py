@@ -21,6 +21,7 @@ colours. The features are those of the frames as recorded.
 
 from __future__ import annotations
 
+import functools
 import logging
 from pathlib import Path
 
@@ -157,13 +158,14 @@ class FeatureCache:
         return array
 
     def _encode(self, episode: int, camera: str, path: Path) -> None:
-        frames = FrameCache(self.ds, self.size).read_once(episode, camera)
-        out = np.empty((len(frames), *self.shape), dtype=STORED)
-        # One thread, as the closed loop encodes its frames (``nn.inference``): batches this
+        # One thread (the resize and the backbone), as the closed loop encodes its frames
+        # (``nn.inference``; 1 and 2 threads give the same float16 bytes here): batches this
         # small gain little from more, and more beside other busy processes (or another
         # worker's video decoding) cost 18 times the time where measured (2 threads beside two
         # jobs on 2 cores: 43 s an episode's camera against 2.4 s).
         with intra_op_threads(INFERENCE_THREADS):
+            frames = FrameCache(self.ds, self.size).read_once(episode, camera)
+            out = np.empty((len(frames), *self.shape), dtype=STORED)
             for i in range(0, len(frames), ENCODE_BATCH):
                 images = torch.from_numpy(np.array(frames[i:i + ENCODE_BATCH])).permute(0, 3, 1, 2)
                 out[i:i + ENCODE_BATCH] = backbone_features(self.backbone, self.stride,
@@ -171,19 +173,17 @@ class FeatureCache:
         save_atomic(path, out)
 
 
-# One cache per worker process, kept across its jobs (the dataset's metadata is read once).
-_WORKER_CACHE: FeatureCache | None = None
+@functools.lru_cache(maxsize=1)
+def _worker_cache(root: str, backbone: str, stride: int, size: tuple[int, int],
+                  cache_dir: str) -> FeatureCache:
+    """A worker process's cache, kept across its jobs (the dataset's metadata read once)."""
+    return FeatureCache(Dataset(root), backbone, stride, size, cache_dir)
 
 
 def _encode_pair(root: str, backbone: str, stride: int, size: tuple[int, int], cache_dir: str,
                  episode: int, camera: str) -> None:
     """A worker's job: one (episode, camera) of the cache at ``cache_dir`` encoded and written."""
-    global _WORKER_CACHE
-    c = _WORKER_CACHE
-    if c is None or (str(c.ds.root), c.backbone, c.stride, c.size, str(c.dir)) != (
-            root, backbone, stride, tuple(size), cache_dir):
-        c = _WORKER_CACHE = FeatureCache(Dataset(root), backbone, stride, size, cache_dir)
-    c._ensure(episode, camera)
+    _worker_cache(root, backbone, stride, tuple(size), cache_dir)._ensure(episode, camera)
 
 
 class FeatureFrames(torch.utils.data.Dataset):
