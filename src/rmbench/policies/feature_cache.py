@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -109,27 +110,24 @@ class FeatureCache:
     def encode(self, todo: list[tuple[int, str]], workers: int = 1) -> int:
         """Encode the (episode, camera) pairs ``todo`` (``missing``'s answer), in ``workers``
         processes (each writes its own files, atomically); how many."""
-        if workers > 1 and len(todo) > 1:
-            return self._encode_parallel(todo, min(workers, len(todo)))
-        for n, (e, c) in enumerate(todo):
-            if n % 20 == 0:
-                log.info("%s: encoding %d of %d episode videos", self.dir, n + 1, len(todo))
-            self._ensure(e, c)
+        done = (self._in_workers(todo, min(workers, len(todo))) if workers > 1 and len(todo) > 1
+                else (self._ensure(e, c) for e, c in todo))
+        for n, _ in enumerate(done, 1):
+            if n % 20 == 0 or n == len(todo):
+                log.info("%s: encoded %d of %d episode videos", self.dir, n, len(todo))
         return len(todo)
 
-    def _encode_parallel(self, todo: list[tuple[int, str]], workers: int) -> int:
+    def _in_workers(self, todo: list[tuple[int, str]], workers: int) -> Iterator[None]:
+        """``todo`` encoded by worker processes, yielding as each pair is written, in order."""
         from rmbench.parallel import in_order, make_executor
 
         executor = make_executor(workers)
         where = (str(self.ds.root), self.backbone, self.stride, self.size, str(self.dir))
         try:
-            for n, _ in enumerate(in_order(executor, ((pair, _encode_pair, (*where, *pair))
-                                                      for pair in todo))):
-                if n % 20 == 0:
-                    log.info("%s: encoded %d of %d episode videos", self.dir, n + 1, len(todo))
+            for _ in in_order(executor, ((pair, _encode_pair, (*where, *pair)) for pair in todo)):
+                yield None
         finally:
             executor.shutdown()
-        return len(todo)
 
     def _ensure(self, episode: int, camera: str) -> np.ndarray:
         path = self.path(episode, camera)
