@@ -1,8 +1,9 @@
 """Recipe probes on the validation episodes: each ``rmbench eval --split validation`` folder
-given becomes one row of benchmarks/results/validation_probes.json (the task, the checkpoint
-and what the probe changes, success with its Wilson 95% interval, how the episodes ended and
-in which stage of the task's plan the failed ones did),
-so a recipe choice reads episodes that no table reports.
+given becomes one row of benchmarks/results/validation_probes.json (the task, what the
+checkpoint reads (state or pixels: which table the probe is for), the checkpoint and what the
+probe changes, success with its Wilson 95% interval, how the episodes ended and in which stage
+of the task's plan the failed ones did), so a recipe choice reads episodes that no table
+reports.
 
     python benchmarks/validation_probes.py --probe "CHANGE=FOLDER" [--probe ...]
         [--out benchmarks/results/validation_probes.json]
@@ -40,8 +41,14 @@ def probe_row(change: str, folder: Path) -> dict:
     if res["episodes"] < run["episodes"]:
         raise SystemExit(f"{folder}: {res['episodes']} of {run['episodes']} episodes so far")
     records = folder / task / "episodes.jsonl"  # where the failures ended, where kept
+    checkpoint = Path(run["policy"].partition(":")[2].split("?")[0])
+    try:  # which table the probe chooses for: what its checkpoint reads
+        obs = json.loads((checkpoint / "config.json").read_text())["config"]["observation"]
+    except (OSError, json.JSONDecodeError, KeyError) as err:
+        raise SystemExit(f"{folder}: its policy's checkpoint config does not say what it "
+                         f"reads ({err})") from None
     failed_at = failures_by_stage(read_records(records)) if records.exists() else None
-    return {"task": task, "change": change, "policy": run["policy"], "seed": run["seed"],
+    return {"task": task, "obs": obs, "change": change, "policy": run["policy"], "seed": run["seed"],
             "episodes": res["episodes"], "successes": res["successes"],
             "success_rate": res["success_rate"], "success_ci95": res["success_ci95"],
             "endings": res["endings"], "failed_at": failed_at, "gym_id": res.get("gym_id"),

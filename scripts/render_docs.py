@@ -18,6 +18,7 @@ table is typed by hand. Success rates carry their Wilson 95% interval (``eval/in
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import re
 import sys
@@ -293,15 +294,31 @@ def pixels_policies() -> str:
             "cells are.\n" + _without_line(res) + _footnote(table))
 
 
-def validation_probes() -> str:
-    """Recipe probes on the validation episodes (benchmarks/validation_probes.py)."""
+def validation_probes(obs: str = "state") -> str:
+    """Recipe probes on the validation episodes of ``obs``'s table
+    (benchmarks/validation_probes.py)."""
     path = RESULTS / "validation_probes.json"
-    probes = json.loads(path.read_text())["probes"] if path.exists() else []
+    probes = [p for p in (json.loads(path.read_text())["probes"] if path.exists() else [])
+              if p["obs"] == obs]
     rows = [[p["task"], f"`{Path(p['policy'].split('?')[0]).name.split('-s')[0]}`", p["change"],
              rate(p), ", ".join(f"{k} {v}" for k, v in p["endings"].items() if v)]
             for p in probes]
     return markdown(["task", "checkpoint (training seed)", "probe", "success (validation)",
                      "endings"], rows)
+
+
+def planner_keys_pixels() -> str:
+    """The camera planner's decisions on held-out press_button demonstrations, per planner
+    setting (benchmarks/planner_keys.py)."""
+    doc = json.loads((RESULTS / "planner_keys_press_button_pixels.json").read_text())
+    rows = []
+    for name, r in doc["checkpoints"].items():
+        by = {d["delay"]: d for d in r["delays"]}
+        rows.append([name] + [f"{by[k]['decisions_right']} of {by[k]['decisions']}; "
+                              f"{by[k]['episodes_all_right']} of {by[k]['episodes']}"
+                              for k in (0, 12)])
+    return markdown(["planner fitted", "keys on the end frames: decisions right; episodes all right",
+                     "keys 12 frames late"], rows)
 
 
 def share_text(c: dict) -> str:
@@ -1098,7 +1115,10 @@ TABLES: dict[str, Callable[[], str]] = {
     "readme-results": readme_results, "state-policies": state_policies,
     "pixels-policies": pixels_policies, "pixels-ablations": pixels_ablations,
     "pixels-cost": pixels_cost, "pixels-failures": pixels_failures,
-    "validation-probes": validation_probes, "observe-grasps": observe_grasps,
+    "validation-probes": validation_probes,
+    "pixels-validation-probes": functools.partial(validation_probes, "pixels"),
+    "pixels-planner-keys": planner_keys_pixels,
+    "observe-grasps": observe_grasps,
     "put-back-loops": put_back_loops,
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds, "state-failures": state_failures,

@@ -14,10 +14,15 @@ def probes():
     return load_script("benchmarks/validation_probes.py")
 
 
-def _eval(folder: Path, split="validation", done=100, successes=79) -> Path:
+def _eval(folder: Path, split="validation", done=100, successes=79, obs="state") -> Path:
     folder.mkdir(parents=True)
+    # one checkpoint per observation, shared by the evaluations: what it reads says which
+    # table the probe is for
+    ckpt = folder.parent / f"ckpt-{obs}"
+    ckpt.mkdir(exist_ok=True)
+    (ckpt / "config.json").write_text(json.dumps({"config": {"observation": obs}}))
     (folder / "run.json").write_text(json.dumps(
-        {"policy": "mem0:ckpt?sample_noise=1", "seed": 0, "episodes": 100, "split": split}))
+        {"policy": f"mem0:{ckpt}?sample_noise=1", "seed": 0, "episodes": 100, "split": split}))
     (folder / "summary.json").write_text(json.dumps({"tasks": {"put_back_block": {
         "episodes": done, "successes": successes, "success_rate": successes / 100,
         "success_ci95": [0.7, 0.86], "endings": {"success": successes}}}}))
@@ -67,3 +72,12 @@ def test_a_probe_keeps_the_stage_its_failures_ended_in(probes, tmp_path):
     assert row["failed_at"] == {"put the block back on its original mat":
                                 {"button pressed more than once": 1}}
     assert probes.probe_row("x", _eval(tmp_path / "b"))["failed_at"] is None  # no records kept
+
+
+def test_a_probe_says_which_table_its_checkpoint_reads_for(probes, tmp_path):
+    assert probes.probe_row("x", _eval(tmp_path / "s"))["obs"] == "state"
+    assert probes.probe_row("x", _eval(tmp_path / "p", obs="pixels"))["obs"] == "pixels"
+    folder = _eval(tmp_path / "gone")
+    (tmp_path / "ckpt-state" / "config.json").unlink()
+    with pytest.raises(SystemExit, match="checkpoint config does not say what it reads"):
+        probes.probe_row("x", folder)

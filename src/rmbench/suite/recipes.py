@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from rmbench.suite.plan import target_of
-from rmbench.tasks import get_task
+from rmbench.tasks import TASKS, get_task
 
 # Plan's recipe fields when nothing says otherwise (benchmarks/learning.py starts from these).
 GENERIC = {"demos": 50, "steps": 3000, "batch": 32, "episodes": 100, "noise": 0.0,
@@ -40,11 +40,18 @@ RECIPES = {
     # and chunk settings, 54,000 steps at batch 128 (docs/results/pixels.md: put_back_block
     # reached 31, 57 and 62 at 18,000, 54,000 and 90,000 steps; 54,000 is the length that
     # fits about an hour of two cores per cell).
+    # On the M(n) rows Mem-0's planner, reading the head camera, fits 15,000 steps in place of
+    # 1,500: on press_button's validation episodes its checkpoint's planner fitted again so
+    # went from 9 [5, 16] to 18 [12, 27] (benchmarks/results/validation_probes.json), and from
+    # 1 to 8 of 30 held-out demonstrations with every decision right
+    # (results/planner_keys_press_button_pixels.json); the state planner fits in 1,500.
     "pixels": {**GENERIC, "steps": 54000, "batch": 128, "noise": 0.02, "rendered_copies": 8,
                "rendered_reach": 0.04, "sets": (
         'backbone="efficientnet_lite0"', "backbone_stride=16", "mem0.head_layers=2",
         "mem0.execute=20", "relative_actions=false", "mem0.action_patch=3",
-        "mem0.sample_noise=0")},
+        "mem0.sample_noise=0"),
+        "task_sets": {name: ("mem0.planner_steps=15000",)
+                      for name, cls in TASKS.items() if cls.tmc == "M(n)"}},
 }
 
 
