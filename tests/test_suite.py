@@ -27,6 +27,7 @@ from rmbench.suite.plan import (
     trained_spec,
 )
 from rmbench.suite.recipes import GENERIC, RECIPES, add_recipe_arguments, recipe_of
+from rmbench.tasks import TASKS, get_task
 from rmbench.tasks.registry import UnknownTaskError
 from tests.conftest import load_script
 
@@ -116,6 +117,22 @@ def test_the_state_recipe_is_the_state_tables_default(tmp_path):
     parser = argparse.ArgumentParser()
     add_recipe_arguments(parser)
     assert recipe_of(parser.parse_args([])) == {**GENERIC, "sets": (), "task_sets": {}}
+
+
+def test_the_camera_recipe_fits_the_planner_longer_on_the_m_n_rows_alone(tmp_path):
+    """The M(1) rows have no planner: their camera cells keep the configs and folders of the
+    recipe without the planner item; each M(n) row's Mem-0 fits its planner 15,000 steps."""
+    recipe = table_recipe([], obs="pixels")
+    plan = Plan("pixels", ("put_back_block", "press_button"), ("mem0",), **recipe)
+    without = Plan("pixels", ("put_back_block", "press_button"), ("mem0",),
+                   **{**recipe, "task_sets": {}})
+    for task in TASKS:
+        planner_steps = config_for("mem0", "pixels", plan.sets_of(task)).planner_steps
+        assert planner_steps == (15000 if get_task(task).tmc == "M(n)" else 1500), task
+    assert plan.train_dir(tmp_path, "put_back_block", "mem0") == \
+        without.train_dir(tmp_path, "put_back_block", "mem0")
+    assert plan.train_dir(tmp_path, "press_button", "mem0") != \
+        without.train_dir(tmp_path, "press_button", "mem0")
 
 
 def test_task_sets_reach_their_task_alone(tmp_path):
