@@ -44,7 +44,8 @@ RECIPES = {
     # 1,500: on press_button's validation episodes its checkpoint's planner fitted again so
     # went from 9 [5, 16] to 18 [12, 27] (benchmarks/results/validation_probes.json), and from
     # 1 to 8 of 30 held-out demonstrations with every decision right
-    # (results/planner_keys_press_button_pixels.json); the state planner fits in 1,500.
+    # (benchmarks/results/planner_keys_press_button_pixels.json); the state planner fits in
+    # 1,500.
     "pixels": {**GENERIC, "steps": 54000, "batch": 128, "noise": 0.02, "rendered_copies": 8,
                "rendered_reach": 0.04, "sets": (
         'backbone="efficientnet_lite0"', "backbone_stride=16", "mem0.head_layers=2",
