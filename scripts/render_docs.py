@@ -360,9 +360,16 @@ def put_back_loops() -> str:
                     rows)
 
 
+def _cores(cell: dict, stage: str, field: str) -> int:
+    """The cores a cell's stage kept busy: its record's threads (training) or workers
+    (evaluation), the most any piece states; 1 where none is stated."""
+    return max([p.get(field) or 1 for p in (cell.get("conditions") or {}).get(stage, [])] or [1])
+
+
 def pixels_cost() -> str:
     """Each measured row's cost: its data stages (shared by its cells) and each cell's
-    training and evaluation, in core-hours as measured (one thread or worker each)."""
+    training and evaluation, in core-hours: each wall times the threads or workers its record
+    states (one where it states none)."""
     res = pixel_table()
     walls = res.get("data_walls", {})
     specs = ["mem0", "mem0:no_memory", "mem0:no_key", "mem0:gt_classifier", "dp", "act"]
@@ -379,8 +386,8 @@ def pixels_cost() -> str:
         fits = "; ".join(f"{COLUMN[s]} {minutes(c['train_wall_s'])}" for s, c in trained.items())
         evals = "; ".join(f"{COLUMN[s]} {minutes(c.get('eval_wall_s'))}" for s, c in cells.items())
         spent = [x for x in data if x is not None] + [
-            c["train_wall_s"] for c in trained.values()] + [
-            c.get("eval_wall_s") or 0 for c in cells.values()]
+            c["train_wall_s"] * _cores(c, "train", "threads") for c in trained.values()] + [
+            (c.get("eval_wall_s") or 0) * _cores(c, "eval", "workers") for c in cells.values()]
         rows.append([task.name, *(minutes(x) for x in data), fits, evals,
                      f"{sum(spent) / 3600:.1f}"])
         if w.get("note"):
