@@ -173,7 +173,10 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
         same = next((g for g in doc.get("superseded", []) if g["why"] == why), None)
         kept = same["cells"] if same else {}
         for task, cells in replaced.items():
-            kept.setdefault(task, {}).update(cells)
+            for spec, cell in cells.items():
+                # the cell a change replaced stays: recording the new recipe's cell again
+                # (under the same why) replaces that one, not the measurement before the change
+                kept.setdefault(task, {}).setdefault(spec, cell)
         doc["superseded"] = groups + [{"why": why, "cells": kept}]
     return doc
 

@@ -16,12 +16,14 @@ follows the last one. A probe of the same task, policy and change replaces its r
 from __future__ import annotations
 
 import argparse
+import filecmp
 import json
 from pathlib import Path
 
 from rmbench.eval.endings import failures_by_stage
 from rmbench.eval.harness import read_records
 from rmbench.eval.rows import put_row
+from rmbench.policies.builtin import checkpoint_observation
 
 OUT = Path(__file__).resolve().parent / "results" / "validation_probes.json"
 
@@ -41,12 +43,11 @@ def probe_row(change: str, folder: Path) -> dict:
     if res["episodes"] < run["episodes"]:
         raise SystemExit(f"{folder}: {res['episodes']} of {run['episodes']} episodes so far")
     records = folder / task / "episodes.jsonl"  # where the failures ended, where kept
-    checkpoint = Path(run["policy"].partition(":")[2].split("?")[0])
-    try:  # which table the probe chooses for: what its checkpoint reads
-        obs = json.loads((checkpoint / "config.json").read_text())["config"]["observation"]
-    except (OSError, json.JSONDecodeError, KeyError) as err:
-        raise SystemExit(f"{folder}: its policy's checkpoint config does not say what it "
-                         f"reads ({err})") from None
+    # which table the probe chooses for: what its checkpoint reads
+    obs = checkpoint_observation(run["policy"].partition(":")[2] or None)
+    if obs is None:
+        raise SystemExit(f"{folder}: {run['policy']!r} is not a trained checkpoint whose "
+                         f"config can be read, so the table it is for is not known")
     failed_at = failures_by_stage(read_records(records)) if records.exists() else None
     return {"task": task, "obs": obs, "change": change, "policy": run["policy"], "seed": run["seed"],
             "episodes": res["episodes"], "successes": res["successes"],
@@ -56,14 +57,32 @@ def probe_row(change: str, folder: Path) -> dict:
                        f"{run['episodes']} --split validation --seed {run['seed']}"}
 
 
+def same_weights(row: dict, checkpoint: Path) -> dict:
+    """``row`` naming ``checkpoint`` in place of the one evaluated, whose weights are the same
+    bytes (a refit run again into a table's folder); a SystemExit where they are not."""
+    kind, _, evaluated = row["policy"].partition(":")
+    path, query = evaluated.split("?")[0], evaluated.partition("?")[2]
+    ours, theirs = Path(path) / "model.safetensors", checkpoint / "model.safetensors"
+    if not (ours.is_file() and theirs.is_file() and filecmp.cmp(ours, theirs, shallow=False)):
+        raise SystemExit(f"{checkpoint}: its weights are not those of {path}")
+    return {**row, "policy": f"{kind}:{checkpoint}" + (f"?{query}" if query else ""),
+            "evaluated_as": row["policy"]}
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--probe", action="append", required=True, metavar="CHANGE=FOLDER")
     p.add_argument("--trained-by", metavar="COMMAND",
                    help="the command that trained the probes' checkpoint, where the probe "
                         "changes the training (kept in their rows as trained_by)")
+    p.add_argument("--same-weights-as", metavar="CKPT", type=Path,
+                   help="the probe's checkpoint holds CKPT's weights byte for byte (checked): "
+                        "its row names CKPT, and the folder evaluated as evaluated_as (one "
+                        "--probe)")
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args(argv)
+    if args.same_weights_as and len(args.probe) != 1:
+        raise SystemExit("--same-weights-as names the checkpoint of one --probe")
     for item in args.probe:
         change, sep, folder = item.rpartition("=")
         if not sep or not change.strip():
@@ -71,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         row = probe_row(change.strip(), Path(folder))
         if args.trained_by:
             row["trained_by"] = args.trained_by
+        if args.same_weights_as:
+            row = same_weights(row, args.same_weights_as)
         put_row(args.out, row, key=("task", "policy", "change"), field="probes")
     print(f"wrote {args.out}")
     return 0

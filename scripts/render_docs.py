@@ -360,16 +360,28 @@ def put_back_loops() -> str:
                     rows)
 
 
-def _cores(cell: dict, stage: str, field: str) -> int:
-    """The cores a cell's stage kept busy: its record's threads (training) or workers
-    (evaluation), the most any piece states; 1 where none is stated."""
-    return max([p.get(field) or 1 for p in (cell.get("conditions") or {}).get(stage, [])] or [1])
+def _core_seconds(cell: dict, stage: str, field: str, wall: float) -> float:
+    """A cell's stage wall in core-seconds: each piece's wall (the whole ``wall`` for a stage
+    of one piece) times the threads (training) or workers (evaluation) its record states, one
+    where it states none."""
+    pieces = (cell.get("conditions") or {}).get(stage, [])
+    if len(pieces) > 1 and all(p.get("wall_s") is not None for p in pieces):
+        return sum(p["wall_s"] * (p.get(field) or 1) for p in pieces)
+    return wall * max([p.get(field) or 1 for p in pieces] or [1])
+
+
+def _busy(cell: dict, stage: str, field: str, wall: float | None) -> str:
+    """A stage's wall in minutes, with the workers or threads that shared it where more than
+    one."""
+    n = max([p.get(field) or 1 for p in (cell.get("conditions") or {}).get(stage, [])] or [1])
+    return minutes(wall) + (f" ({n} {field})" if n > 1 else "")
 
 
 def pixels_cost() -> str:
     """Each measured row's cost: its data stages (shared by its cells) and each cell's
     training and evaluation, in core-hours: each wall times the threads or workers its record
-    states (one where it states none)."""
+    states (one where it states none). The cells shown alone: superseded ones are not
+    counted."""
     res = pixel_table()
     walls = res.get("data_walls", {})
     specs = ["mem0", "mem0:no_memory", "mem0:no_key", "mem0:gt_classifier", "dp", "act"]
@@ -383,11 +395,14 @@ def pixels_cost() -> str:
         # gt_classifier evaluates Mem-0's checkpoint: its record's training is Mem-0's
         trained = {s: c for s, c in cells.items()
                    if s != "mem0:gt_classifier" and c.get("train_wall_s") is not None}
-        fits = "; ".join(f"{COLUMN[s]} {minutes(c['train_wall_s'])}" for s, c in trained.items())
-        evals = "; ".join(f"{COLUMN[s]} {minutes(c.get('eval_wall_s'))}" for s, c in cells.items())
+        fits = "; ".join(f"{COLUMN[s]} {_busy(c, 'train', 'threads', c['train_wall_s'])}"
+                         for s, c in trained.items())
+        evals = "; ".join(f"{COLUMN[s]} {_busy(c, 'eval', 'workers', c.get('eval_wall_s'))}"
+                          for s, c in cells.items())
         spent = [x for x in data if x is not None] + [
-            c["train_wall_s"] * _cores(c, "train", "threads") for c in trained.values()] + [
-            (c.get("eval_wall_s") or 0) * _cores(c, "eval", "workers") for c in cells.values()]
+            _core_seconds(c, "train", "threads", c["train_wall_s"]) for c in trained.values()] + [
+            _core_seconds(c, "eval", "workers", c.get("eval_wall_s") or 0)
+            for c in cells.values()]
         rows.append([task.name, *(minutes(x) for x in data), fits, evals,
                      f"{sum(spent) / 3600:.1f}"])
         if w.get("note"):
@@ -402,7 +417,7 @@ def pixels_cost() -> str:
             notes += [f"{task.name}, {COLUMN[s]}'s {what}: {n}"
                       for what, ns in said.items() for n in ns]
     table = markdown(["task", "demonstrations", "rendered copies", "cached features", "training",
-                      "evaluation", "core-hours so far"], rows) if rows else "No row measured yet.\n"
+                      "evaluation", "core-hours of these cells"], rows) if rows else "No row measured yet.\n"
     return table + "".join(f"\n{n}\n" for n in notes)
 
 

@@ -13,6 +13,7 @@ import pytest
 from rmbench.cli.main import main as cli
 from rmbench.eval.chance import chance
 from rmbench.machine import describe, short
+from rmbench.policies.mem0.config import Mem0Config
 from rmbench.suite import clock, runner, stages, tables
 from rmbench.suite.plan import (
     Plan,
@@ -128,7 +129,8 @@ def test_the_camera_recipe_fits_the_planner_longer_on_the_m_n_rows_alone(tmp_pat
                    **{**recipe, "task_sets": {}})
     for task in TASKS:
         planner_steps = config_for("mem0", "pixels", plan.sets_of(task)).planner_steps
-        assert planner_steps == (15000 if get_task(task).tmc == "M(n)" else 1500), task
+        assert planner_steps == (15000 if get_task(task).tmc == "M(n)"
+                                 else Mem0Config().planner_steps), task
     assert plan.train_dir(tmp_path, "put_back_block", "mem0") == \
         without.train_dir(tmp_path, "put_back_block", "mem0")
     assert plan.train_dir(tmp_path, "press_button", "mem0") != \

@@ -56,6 +56,12 @@ def test_a_cell_of_another_recipe_moves_to_superseded_on_the_same_data(table_sta
     with pytest.raises(SystemExit, match="--why"):
         table_state.record(doc, _run(41), ["press_button"], ["mem0"], "rmbench/2", None, "t",
                            recipe_changed=True)
+    # the new recipe's cell recorded again: the cell before the change stays superseded
+    doc = table_state.record(doc, _run(42), ["press_button"], ["mem0"], "rmbench/2",
+                             "the recipe changed", "t", recipe_changed=True)
+    assert doc["cells"]["press_button"]["mem0"]["successes"] == 42
+    (moved,) = [g for g in doc["superseded"] if g["why"] == "the recipe changed"]
+    assert moved["cells"]["press_button"]["mem0"]["successes"] == 36
 
 
 def test_a_cell_not_evaluated_is_a_one_line_error(table_state):

@@ -77,7 +77,32 @@ def test_a_probe_keeps_the_stage_its_failures_ended_in(probes, tmp_path):
 def test_a_probe_says_which_table_its_checkpoint_reads_for(probes, tmp_path):
     assert probes.probe_row("x", _eval(tmp_path / "s"))["obs"] == "state"
     assert probes.probe_row("x", _eval(tmp_path / "p", obs="pixels"))["obs"] == "pixels"
+    # a config from before the field existed is a camera checkpoint's, as the policies read it
+    old = _eval(tmp_path / "old")
+    (tmp_path / "ckpt-state" / "config.json").write_text(json.dumps({"config": {}}))
+    assert probes.probe_row("x", old)["obs"] == "pixels"
     folder = _eval(tmp_path / "gone")
     (tmp_path / "ckpt-state" / "config.json").unlink()
-    with pytest.raises(SystemExit, match="checkpoint config does not say what it reads"):
+    with pytest.raises(SystemExit, match="not a trained checkpoint whose config can be read"):
         probes.probe_row("x", folder)
+
+
+def test_a_probe_names_a_checkpoint_of_the_same_weights_and_no_other(probes, tmp_path):
+    out = tmp_path / "probes.json"
+    a = _eval(tmp_path / "a")
+    (tmp_path / "ckpt-state" / "model.safetensors").write_bytes(b"weights")
+    twin = tmp_path / "table" / "mem0-s100"
+    twin.mkdir(parents=True)
+    (twin / "model.safetensors").write_bytes(b"weights")
+    assert probes.main(["--probe", f"x={a}", "--same-weights-as", str(twin),
+                        "--out", str(out)]) == 0
+    (row,) = json.loads(out.read_text())["probes"]
+    assert row["policy"] == f"mem0:{twin}?sample_noise=1"
+    assert row["evaluated_as"] == f"mem0:{tmp_path / 'ckpt-state'}?sample_noise=1"
+    assert str(tmp_path / "ckpt-state") in row["command"]  # the command as it ran
+    (twin / "model.safetensors").write_bytes(b"other weights")
+    with pytest.raises(SystemExit, match="its weights are not those of"):
+        probes.main(["--probe", f"x={a}", "--same-weights-as", str(twin), "--out", str(out)])
+    with pytest.raises(SystemExit, match="one --probe"):
+        probes.main(["--probe", f"x={a}", "--probe", f"y={a}", "--same-weights-as", str(twin),
+                     "--out", str(out)])

@@ -102,10 +102,17 @@ def _checkpoint_config(arg: str | None) -> dict[str, Any] | None:
         return None
 
 
+def checkpoint_observation(arg: str | None) -> str | None:
+    """What a learned policy's checkpoint (``CKPT[?options]``) reads: "state" or "pixels" (a
+    config from before the field existed read pixels); None if its config is unreadable."""
+    config = _checkpoint_config(arg)
+    return None if config is None else config.get("observation", "pixels")
+
+
 def checkpoint_obs_type(arg: str | None) -> str:
     """The env observation a learned policy's checkpoint reads: the state observation for one
     trained with observation "state", else pixels (an unreadable checkpoint too)."""
-    state = (_checkpoint_config(arg) or {}).get("observation") == "state"
+    state = checkpoint_observation(arg) == "state"
     # rmbench.make's obs_type values (rmbench.envs.env.OBS_TYPES)
     return "environment_state_agent_pos" if state else "pixels_agent_pos"
 
