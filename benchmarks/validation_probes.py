@@ -61,7 +61,7 @@ def same_weights(row: dict, checkpoint: Path) -> dict:
     """``row`` naming ``checkpoint`` in place of the one evaluated, whose weights are the same
     bytes (a refit run again into a table's folder); a SystemExit where they are not."""
     kind, _, evaluated = row["policy"].partition(":")
-    path, query = evaluated.split("?")[0], evaluated.partition("?")[2]
+    path, _, query = evaluated.partition("?")
     ours, theirs = Path(path) / "model.safetensors", checkpoint / "model.safetensors"
     if not (ours.is_file() and theirs.is_file() and filecmp.cmp(ours, theirs, shallow=False)):
         raise SystemExit(f"{checkpoint}: its weights are not those of {path}")

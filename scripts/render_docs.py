@@ -360,20 +360,25 @@ def put_back_loops() -> str:
                     rows)
 
 
+def _most(cell: dict, stage: str, field: str) -> int:
+    """The most threads (training) or workers (evaluation) any piece of a cell's stage states;
+    one where none states any."""
+    return max([p.get(field) or 1 for p in (cell.get("conditions") or {}).get(stage, [])] or [1])
+
+
 def _core_seconds(cell: dict, stage: str, field: str, wall: float) -> float:
     """A cell's stage wall in core-seconds: each piece's wall (the whole ``wall`` for a stage
-    of one piece) times the threads (training) or workers (evaluation) its record states, one
-    where it states none."""
+    of one piece) times the threads or workers it states, one where it states none."""
     pieces = (cell.get("conditions") or {}).get(stage, [])
     if len(pieces) > 1 and all(p.get("wall_s") is not None for p in pieces):
         return sum(p["wall_s"] * (p.get(field) or 1) for p in pieces)
-    return wall * max([p.get(field) or 1 for p in pieces] or [1])
+    return wall * _most(cell, stage, field)
 
 
 def _busy(cell: dict, stage: str, field: str, wall: float | None) -> str:
     """A stage's wall in minutes, with the workers or threads that shared it where more than
     one."""
-    n = max([p.get(field) or 1 for p in (cell.get("conditions") or {}).get(stage, [])] or [1])
+    n = _most(cell, stage, field)
     return minutes(wall) + (f" ({n} {field})" if n > 1 else "")
 
 
