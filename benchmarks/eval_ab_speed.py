@@ -31,6 +31,7 @@ from train_speed import ROOT, run, worktree
 from rmbench.eval.intervals import wilson
 from rmbench.files import write_json
 from rmbench.machine import describe
+from rmbench.policies.config import split_policy
 
 PYTHON = Path(sys.executable)
 # One side's evaluation, run under that side's rmbench: its CPU time around evaluate() and
@@ -66,7 +67,7 @@ def side(src: Path, task: str, policy: str, out: Path, episodes: int, batch: int
 
 def checkpoint_facts(policy: str) -> dict | None:
     """A checkpoint's step and recipe, from its config.json (a ``NAME:CKPT`` spec)."""
-    path = Path(policy.partition(":")[2].partition("?")[0]) / "config.json"
+    path = Path(split_policy(policy)[1]) / "config.json"
     if not path.is_file():
         return None
     config = json.loads(path.read_text())

@@ -24,6 +24,7 @@ from rmbench.eval.endings import failures_by_stage
 from rmbench.eval.harness import read_records
 from rmbench.eval.rows import put_row
 from rmbench.policies.builtin import checkpoint_observation
+from rmbench.policies.config import split_policy
 
 OUT = Path(__file__).resolve().parent / "results" / "validation_probes.json"
 
@@ -44,7 +45,7 @@ def probe_row(change: str, folder: Path) -> dict:
         raise SystemExit(f"{folder}: {res['episodes']} of {run['episodes']} episodes so far")
     records = folder / task / "episodes.jsonl"  # where the failures ended, where kept
     # which table the probe chooses for: what its checkpoint reads
-    obs = checkpoint_observation(run["policy"].partition(":")[2] or None)
+    obs = checkpoint_observation(split_policy(run["policy"])[1] or None)
     if obs is None:
         raise SystemExit(f"{folder}: {run['policy']!r} is not a trained checkpoint whose "
                          f"config can be read, so the table it is for is not known")
@@ -60,8 +61,7 @@ def probe_row(change: str, folder: Path) -> dict:
 def same_weights(row: dict, checkpoint: Path) -> dict:
     """``row`` naming ``checkpoint`` in place of the one evaluated, whose weights are the same
     bytes (a refit run again into a table's folder); a SystemExit where they are not."""
-    kind, _, evaluated = row["policy"].partition(":")
-    path, _, query = evaluated.partition("?")
+    kind, path, query = split_policy(row["policy"])
     ours, theirs = Path(path) / "model.safetensors", checkpoint / "model.safetensors"
     if not (ours.is_file() and theirs.is_file() and filecmp.cmp(ours, theirs, shallow=False)):
         raise SystemExit(f"{checkpoint}: its weights are not those of {path}")

@@ -33,6 +33,7 @@ from rmbench.eval.endings import failure_kind
 from rmbench.eval.intervals import difference, format_difference, format_rate
 from rmbench.eval.report import PUBLISHED, Rate, published_source
 from rmbench.files import write_atomic
+from rmbench.policies.config import split_policy
 from rmbench.suite.plan import applies
 from rmbench.suite.records import reads_subtask_cut, seed_records
 from rmbench.suite.tables import difference_table, differences
@@ -300,7 +301,7 @@ def validation_probes(obs: str = "state") -> str:
     path = RESULTS / "validation_probes.json"
     probes = [p for p in (json.loads(path.read_text())["probes"] if path.exists() else [])
               if p["obs"] == obs]
-    rows = [[p["task"], f"`{Path(p['policy'].split('?')[0]).name.split('-s')[0]}`", p["change"],
+    rows = [[p["task"], f"`{Path(split_policy(p['policy'])[1]).name.split('-s')[0]}`", p["change"],
              rate(p), ", ".join(f"{k} {v}" for k, v in p["endings"].items() if v)]
             for p in probes]
     return markdown(["task", "checkpoint (training seed)", "probe", "success (validation)",

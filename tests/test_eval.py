@@ -211,6 +211,20 @@ def test_a_broken_policy_plugin_leaves_every_other_policy_loadable(monkeypatch):
         registry.parse_spec("theirs")
 
 
+def test_a_policy_string_splits_into_name_checkpoint_and_options():
+    from rmbench.policies.config import parse_argument, split_policy
+    from rmbench.policies.mem0.config import Mem0Config
+
+    assert split_policy("mem0:runs/a/ckpt?ablation=no_key&execute=4") == (
+        "mem0", "runs/a/ckpt", "ablation=no_key&execute=4")
+    assert split_policy("mem0:runs/a/ckpt") == ("mem0", "runs/a/ckpt", "")
+    assert split_policy("expert") == ("expert", "", "")
+    path, overrides, options = parse_argument("runs/a/ckpt?execute=4&ablation=no_key",
+                                              Mem0Config, extra=("ablation",))
+    assert (str(path), overrides, options) == ("runs/a/ckpt", {"execute": 4},
+                                               {"ablation": "no_key"})
+
+
 def test_the_registration_alone_says_which_cameras_a_policy_reads():
     from rmbench.policies import registry
 

@@ -12,6 +12,7 @@ import numpy as np
 
 from rmbench.experts import make_expert
 from rmbench.policies.base import BasePolicy
+from rmbench.policies.config import split_argument
 from rmbench.policies.registry import register_policy
 
 
@@ -96,7 +97,7 @@ def _checkpoint_config(arg: str | None) -> dict[str, Any] | None:
     config.json without importing torch; None if unreadable: building the policy then says
     what is wrong."""
     try:
-        config = json.loads((Path((arg or "").partition("?")[0]) / "config.json").read_text())
+        config = json.loads((Path(split_argument(arg)[0]) / "config.json").read_text())
         return config["config"] if isinstance(config["config"], dict) else None
     except (OSError, ValueError, KeyError, TypeError):
         return None
@@ -136,7 +137,7 @@ def _mem0(arg, env):
 
 def _mem0_reads_simulator(arg: str | None) -> bool:
     """gt_classifier takes the subtask boundary from the simulator, not the observation."""
-    query = dict(parse_qsl((arg or "").partition("?")[2]))
+    query = dict(parse_qsl(split_argument(arg)[1]))
     return "gt_classifier" in query.get("ablation", "").split(",")
 
 

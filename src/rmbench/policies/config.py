@@ -54,11 +54,24 @@ def parse_overrides(config_cls: type[PolicyConfig], items: list[str]) -> dict[st
     return out
 
 
+def split_argument(arg: str | None) -> tuple[str, str]:
+    """``CKPT[?option=value&...]`` as its checkpoint folder and its options' query text."""
+    path, _, query = (arg or "").partition("?")
+    return path, query
+
+
+def split_policy(spec: str) -> tuple[str, str, str]:
+    """``POLICY[:CKPT[?option=value&...]]`` as the policy's name, its checkpoint folder and its
+    options' query text ("" where a part is absent)."""
+    name, _, arg = spec.partition(":")
+    return (name, *split_argument(arg))
+
+
 def parse_argument(arg: str, config_cls: type[PolicyConfig], extra: tuple[str, ...] = ()
                    ) -> tuple[Path, dict[str, Any], dict[str, str]]:
     """``CKPT[?option=value&...]``: the checkpoint folder, the config overrides (the class's
     ``INFERENCE_FIELDS``, values as JSON) and the policy's own ``extra`` options (raw text)."""
-    path, _, query = arg.partition("?")
+    path, query = split_argument(arg)
     known = tuple(extra) + tuple(config_cls.INFERENCE_FIELDS)
     overrides: dict[str, Any] = {}
     options: dict[str, str] = {}

@@ -26,6 +26,7 @@ from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
 from rmbench.eval.report import Rate
 from rmbench.machine import describe
+from rmbench.policies.config import split_policy
 from rmbench.suite.clock import TIMING
 from rmbench.suite.stages import result_row
 from rmbench.tasks import get_task
@@ -140,8 +141,7 @@ def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
     runs on (record where the evaluation ran). Paths are read as the evaluation wrote them,
     so this runs where it ran."""
     run, summary = (json.loads((folder / f).read_text()) for f in ("run.json", "summary.json"))
-    _, _, arg = run["policy"].partition(":")
-    ckpt = Path(arg.split("?")[0])
+    ckpt = Path(split_policy(run["policy"])[1])
     if not (ckpt / "config.json").is_file():
         raise ValueError(f"{folder}: evaluates {run['policy']!r}, not a checkpoint found here")
     config = json.loads((ckpt / "config.json").read_text())
