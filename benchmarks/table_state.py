@@ -31,8 +31,9 @@ and chance levels, and no cells yet.
 
 A recorded cell keeps the command that made it, the dataset format it trained on and its
 walls' ``conditions`` (``suite/records.py``): what ``--machine``, ``--jobs-beside``,
-``--beside``, ``--threads``, ``--workers``, ``--note``, ``--train-note`` and ``--eval-note``
-say, every other field null; a training run in pieces on several machines (a GPU, then a
+``--beside``, ``--threads``, ``--workers`` and ``--note`` say (``--train-note``,
+``--train-beside``, ``--eval-note`` and ``--eval-beside`` for one stage's wall alone), every
+other field null; a training run in pieces on several machines (a GPU, then a
 CPU) states each with ``--train-piece``, one cell at a time. The file is written atomically.
 
     python benchmarks/table_state.py --table runs/table_state --tasks battery_try \
@@ -117,15 +118,16 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
            train_pieces: list[dict] | None = None) -> dict:
     """``doc`` with ``run``'s cells of ``tasks`` x ``specs`` in place of its own (or, with
     ``seed``, added to its own as that training seed); ``conditions``: the fields
-    ``stated_conditions`` writes into each new cell's walls' conditions (``train_note`` and
-    ``eval_note`` into its training's or its evaluation's alone); ``recipe_changed``: the
+    ``stated_conditions`` writes into each new cell's walls' conditions (``train_note``,
+    ``train_beside``, ``eval_note`` and ``eval_beside`` into its training's or its
+    evaluation's alone, over ``note`` and ``beside``); ``recipe_changed``: the
     cells replaced were another recipe's, kept under ``superseded`` whatever their data and
     task version; ``train_pieces``: the training's pieces (``stated_conditions``), for a
     training run on several machines."""
     said = dict(conditions or {})
     # what one stage's wall alone needs said
-    stages = {"train": {"note": said.pop("train_note", None)},
-              "eval": {"note": said.pop("eval_note", None)}}
+    stages = {stage: {"note": said.pop(f"{stage}_note", None),
+                      "beside": said.pop(f"{stage}_beside", None)} for stage in ("train", "eval")}
     replaced: dict[str, dict] = {}
     for task in tasks:
         for spec in specs:
@@ -216,6 +218,10 @@ def main(argv: list[str] | None = None) -> int:
     said.add_argument("--jobs-beside", type=int, metavar="N",
                       help="other jobs that shared the machine with each stage")
     said.add_argument("--beside", metavar="TEXT", help="what those jobs were, in words")
+    said.add_argument("--train-beside", metavar="TEXT",
+                      help="what ran beside the training alone (over --beside)")
+    said.add_argument("--eval-beside", metavar="TEXT",
+                      help="what ran beside the evaluation alone (over --beside)")
     said.add_argument("--threads", type=int, help="the training's torch threads")
     said.add_argument("--workers", type=int, help="the evaluation's workers")
     said.add_argument("--note", metavar="TEXT", help="anything else the walls need said")
@@ -260,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
                  args.seed, {k: getattr(args, k) for k in (
                      "machine", "jobs_beside", "beside", "threads", "workers", "note",
-                     "train_note", "eval_note")},
+                     "train_note", "eval_note", "train_beside", "eval_beside")},
                  args.recipe_changed, args.train_piece)
     write_json(args.out, doc)
     print(f"wrote {args.out}")

@@ -272,6 +272,13 @@ def test_the_walls_conditions_are_written_from_the_command_line(table_state):
     train, = doc["cells"]["press_button"]["mem0"]["conditions"]["train"]
     ev, = doc["cells"]["press_button"]["mem0"]["conditions"]["eval"]
     assert (train["note"], ev["note"]) == ("in two pieces", "resumed")
+    # what ran beside each stage, where the two differ
+    said = {**said, "eval_beside": "the next task's data"}
+    doc = table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2",
+                             "format 1", "t", conditions=said)
+    train, = doc["cells"]["press_button"]["mem0"]["conditions"]["train"]
+    ev, = doc["cells"]["press_button"]["mem0"]["conditions"]["eval"]
+    assert (train["beside"], ev["beside"]) == ("a camera-table training", "the next task's data")
     with pytest.raises(ValueError, match="no stage check"):
         stated_conditions("mem0", {"check": {"note": "x"}})
     # gt_classifier evaluates Mem-0's checkpoint: no training piece to state
