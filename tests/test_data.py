@@ -185,6 +185,15 @@ def test_other_arguments_on_an_existing_dataset_are_refused(dataset, tmp_path):
     assert check_dataset(root)["episodes"] == 3  # nothing was touched
 
 
+def test_a_damaged_info_json_is_named_when_resuming(dataset, tmp_path):
+    root = copy(dataset, tmp_path)
+    files = sorted(p.relative_to(root) for p in root.rglob("*"))
+    (root / L.INFO).write_text("{bad")
+    with pytest.raises(DatasetError, match=r"info\.json: damaged"):
+        collect(small(root, episodes=4))
+    assert sorted(p.relative_to(root) for p in root.rglob("*")) == files  # nothing removed
+
+
 def test_overwrite_starts_over_and_foreign_folders_are_safe(tmp_path):
     foreign = tmp_path / "mine"
     foreign.mkdir()

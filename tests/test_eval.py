@@ -156,7 +156,8 @@ def test_episodes_recorded_before_versions_were_kept_count_as_that_version(tmp_p
     assert recorded_gym_id("battery_try", {}) == "rmbench/BatteryTry-v1"
     assert recorded_gym_id("swap_blocks", {}) == "rmbench/SwapBlocks-v1"
     assert recorded_gym_id("swap_blocks", {"gym_id": "rmbench/SwapBlocks-v2"}) == "rmbench/SwapBlocks-v2"
-    (tmp_path / "episodes.jsonl").write_text('{"seed": 1}\n')
+    (tmp_path / "episodes.jsonl").write_text('{"seed": 1, "success": false, "reason": "timeout", '
+                                              '"progress": 0.0}\n')
     with pytest.raises(EvalError, match="holds episodes of rmbench/BatteryTry-v1, this"):
         _check_version(tmp_path, "battery_try")
     assert not (tmp_path / "version.json").exists()
@@ -292,3 +293,35 @@ def test_an_analysis_watches_every_step_of_the_evaluated_episode():
     plain = run_policy_episode(env, Faulty(), 100003)  # watching changes nothing
     assert {k: v for k, v in plain.items() if k != "wall_s"} == \
         {k: v for k, v in record.items() if k != "wall_s"}
+
+
+def test_a_damaged_record_mid_file_is_an_error_that_loses_nothing(tmp_path):
+    evaluate(cfg(tmp_path, policy="random"))
+    path = tmp_path / "out" / TASK / "episodes.jsonl"
+    lines = path.read_text().splitlines(keepends=True)
+    for bad in ('{"x": 1\n', "\n", "5\n", '{"task": "x"}\n'):
+        damaged = lines[0] + bad + "".join(lines[1:])
+        path.write_text(damaged)
+        with pytest.raises(EvalError, match=r"episodes.jsonl: line 2 is not an episode record"):
+            records(tmp_path)
+        with pytest.raises(EvalError, match="line 2 is not an episode record"):
+            evaluate(cfg(tmp_path, policy="random"))
+        assert path.read_text() == damaged  # neither the reader nor the resume cut it
+    # a torn last line is left out by a reader, and cut only by the evaluation that appends
+    path.write_text("".join(lines) + lines[0][:20])
+    assert len(records(tmp_path)) == 3 and path.read_text().endswith(lines[0][:20])
+
+
+def test_a_bad_policy_is_refused_before_anything_is_written(tmp_path):
+    with pytest.raises(ValueError, match="not a checkpoint"):
+        evaluate(cfg(tmp_path, policy=f"mem0:{tmp_path / 'missing'}"))
+    with pytest.raises(ValueError, match="missing"):
+        evaluate(cfg(tmp_path, policy="noop", seeds_of=str(tmp_path / "missing")))
+    assert not (tmp_path / "out").exists()
+    # a folder whose run stopped before its first episode is taken over by the next command
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "run.json").write_text(json.dumps({"policy": "random"}))
+    assert evaluate(cfg(tmp_path, policy="noop", episodes=1))["policy"] == "noop"
+    (tmp_path / "out" / "run.json").write_text("[1, 2]")
+    with pytest.raises(ValueError, match=r"run.json: holds a JSON list, not an object"):
+        evaluate(cfg(tmp_path, policy="noop", episodes=1))

@@ -29,6 +29,7 @@ def test_put_backs_read_the_places_the_task_declares(tmp_path):
     (folder / "put_back_block").mkdir(parents=True)
     (folder / "run.json").write_text(json.dumps({"policy": "expert", "seed": 0}))
     (folder / "put_back_block" / "episodes.jsonl").write_text(
-        json.dumps({"success": True, "events": events, "reason": "success", "message": ""}) + "\n")
+        json.dumps({"seed": 1, "success": True, "events": events, "reason": "success",
+                    "message": "", "progress": 1.0}) + "\n")
     with pytest.raises(SystemExit, match="put_back_block declares no place predicates"):
         loops.run_row("x", folder, loop=2)

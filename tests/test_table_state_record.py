@@ -106,8 +106,10 @@ def test_an_evaluation_folder_gives_one_column_with_its_checkpoints_history(tmp_
     (evals / "summary.json").write_text(json.dumps({"tasks": {"press_button": {
         "successes": 1, "episodes": 2, "success_rate": 0.5, "mean_progress": 0.5,
         "endings": {"success": 1, "timeout": 1}, "gym_id": "rmbench/PressButton-v2"}}}))
-    episodes = [{"seed": 1, "success": True, "reason": "success", "message": "", "wall_s": 3.0},
-                {"seed": 2, "success": False, "reason": "timeout", "message": "", "wall_s": 4.5}]
+    episodes = [{"seed": 1, "success": True, "reason": "success", "message": "", "wall_s": 3.0,
+                 "progress": 1.0},
+                {"seed": 2, "success": False, "reason": "timeout", "message": "", "wall_s": 4.5,
+                 "progress": 0.0}]
     (evals / "press_button" / "episodes.jsonl").write_text(
         "".join(json.dumps(e) + "\n" for e in episodes))
     res = evaluation_rows(evals, "mem0:gt_classifier")

@@ -65,9 +65,10 @@ def test_a_probe_keeps_the_stage_its_failures_ended_in(probes, tmp_path):
     events = [[0, "task", "subtask", "move the block to the centre"],
               [90, "task", "subtask", "put the block back on its original mat"]]
     (folder / "put_back_block" / "episodes.jsonl").write_text("\n".join(json.dumps(r) for r in (
-        {"success": True, "events": events[:1], "reason": "success", "message": ""},
-        {"success": False, "events": events, "reason": "task_failure",
-         "message": "button pressed more than once"})) + "\n")
+        {"seed": 1, "success": True, "events": events[:1], "reason": "success", "message": "",
+         "progress": 1.0},
+        {"seed": 2, "success": False, "events": events, "reason": "task_failure",
+         "message": "button pressed more than once", "progress": 0.5})) + "\n")
     row = probes.probe_row("x", folder)
     assert row["failed_at"] == {"put the block back on its original mat":
                                 {"button pressed more than once": 1}}

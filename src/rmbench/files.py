@@ -2,7 +2,9 @@
 
 Every file rmbench writes that another process may read, or that a killed run leaves behind
 (datasets, checkpoints, records, reports, results), is written under a temporary name in
-its own folder and renamed into place (``os.replace`` is atomic within a filesystem).
+its own folder and renamed into place (``os.replace`` is atomic within a filesystem). A JSON
+file read back that is not what was written (edited by hand, damaged) is a one-line error
+naming it (``read_json_object``).
 """
 
 from __future__ import annotations
@@ -40,3 +42,22 @@ def write_json(path: str | Path, obj: Any, indent: int | None = 1) -> None:
     """``obj`` as JSON (indented, or on one line with ``indent=None``) with a final newline,
     written atomically."""
     write_atomic(path, (json.dumps(obj, indent=indent) + "\n").encode())
+
+
+class FileFormatError(ValueError):
+    """A file this rmbench wrote reads back as something else (hand-edited, damaged)."""
+
+
+def read_json_object(path: str | Path, keys: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The JSON object in ``path``, which must hold ``keys``; a FileFormatError naming the file
+    for one that is unreadable, not an object, or lacks one of them."""
+    try:
+        obj = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise FileFormatError(f"{path}: not readable JSON ({err})") from None
+    if not isinstance(obj, dict):
+        raise FileFormatError(f"{path}: holds a JSON {type(obj).__name__}, not an object")
+    missing = [k for k in keys if k not in obj]
+    if missing:
+        raise FileFormatError(f"{path}: no {', '.join(map(repr, missing))} field")
+    return obj

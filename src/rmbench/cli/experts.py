@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from rmbench.cli.common import add_json
+from rmbench.cli.common import add_json, whole
 
 
 def cmd_tasks(args) -> int:
@@ -112,7 +112,8 @@ def add_parsers(sub) -> None:
     p = sub.add_parser("expert", help="run the scripted expert and report its success rate")
     p.add_argument("task", help="task name or gym id (see `rmbench tasks`)")
     p.add_argument("--episodes", type=int, default=10)
-    p.add_argument("--seed", type=int, default=100000, help="first seed (seeds are consecutive)")
+    p.add_argument("--seed", type=whole(0), default=100000,
+                   help="first seed (seeds are consecutive)")
     p.add_argument("--render", action=argparse.BooleanOptionalAction, default=False,
                    help="render the observation cameras each step (default: physics only)")
     p.add_argument("--video", metavar="DIR", help="write a third-person video per episode")
@@ -129,14 +130,15 @@ def add_parsers(sub) -> None:
                    help="standard deviations in radians on the arm-joint targets")
     p.add_argument("--tau", type=float, default=0.5, help="smooth noise time constant (s)")
     p.add_argument("--episodes", type=int, default=100, help="seeds per noise level")
-    p.add_argument("--seed", type=int, default=100000, help="first seed (seeds are consecutive)")
-    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--seed", type=whole(0), default=100000,
+                   help="first seed (seeds are consecutive)")
+    p.add_argument("--workers", type=whole(1), default=1)
     add_json(p)
     p.set_defaults(func=cmd_robustness)
 
     p = sub.add_parser("quickstart", help="expert on every task for a few seeds, with videos")
     p.add_argument("--out", default="runs/quickstart", help="output folder")
     p.add_argument("--episodes", type=int, default=3)
-    p.add_argument("--seed", type=int, default=100000)
+    p.add_argument("--seed", type=whole(0), default=100000)
     add_json(p)
     p.set_defaults(func=cmd_quickstart)

@@ -35,6 +35,9 @@ def main(argv: list[str] | None = None) -> int:
     except (UnknownTaskError, ValueError, RuntimeError) as err:
         print(f"rmbench: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # a path that is a file, a port in use, a server that is not there
+        print(f"rmbench: error: {err}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("rmbench: interrupted", file=sys.stderr)
         return 130

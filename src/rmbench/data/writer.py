@@ -24,7 +24,7 @@ import pyarrow.parquet as pq
 from rmbench.data import layout as L
 from rmbench.data.record import EpisodeRecord
 from rmbench.data.stats import aggregate, array_stats, pop_stats, to_json
-from rmbench.files import atomic_path, write_atomic, write_json
+from rmbench.files import FileFormatError, atomic_path, read_json_object, write_atomic, write_json
 from rmbench.identity import differences
 from rmbench.tasks import get_task
 
@@ -240,14 +240,18 @@ class DatasetWriter:
             self._stats.append(stats)
         if self.episodes:
             self.environment_state = L.ENV_STATE in self._stats[0]
-            try:
-                names = json.loads((self.root / L.INFO).read_text())["features"].get(
-                    L.ENV_STATE, {}).get("names")
-            except (OSError, json.JSONDecodeError, KeyError):
-                names = None
-            if self.environment_state and names != list(self.task.state_names):
-                raise DatasetError(f"{self.root} records another {L.ENV_STATE} layout than "
-                                   f"{self.task.name}'s state_names now; --overwrite to start over")
+            info = self.root / L.INFO
+            if info.exists():  # (a run killed between its first episode and info.json has none)
+                try:
+                    features = read_json_object(info, ("features",))["features"]
+                    names = features.get(L.ENV_STATE, {}).get("names")
+                except (FileFormatError, AttributeError):
+                    raise DatasetError(f"{info}: damaged, not the info.json this rmbench "
+                                       f"writes; --overwrite to start over") from None
+                if self.environment_state and names != list(self.task.state_names):
+                    raise DatasetError(f"{self.root} records another {L.ENV_STATE} layout than "
+                                       f"{self.task.name}'s state_names now; --overwrite to "
+                                       f"start over")
         last_seed = self.episodes[-1]["rmbench/seed"] if self.episodes else -1
         self.skipped = [s for s in saved.get("skipped", []) if s["seed"] < last_seed]
         removed = self._remove_uncommitted()

@@ -13,7 +13,8 @@ Records are appended in seed order whatever the worker count, so results are ide
 any number of workers or backend. Within a worker a policy with the batched form of the
 interface (``policies/base.py``) plays ``batch`` episodes side by side (``eval/episode.py``);
 one without it plays them one after another. A killed run re-run with the same arguments
-keeps every complete record (a torn last line is dropped) and runs only the missing seeds.
+keeps every complete record (a torn last line is dropped) and runs only the missing seeds;
+a damaged record elsewhere is an error that leaves the file as it is.
 """
 
 from __future__ import annotations
@@ -34,10 +35,10 @@ from rmbench.eval.intervals import format_difference, wilson
 from rmbench.eval.probe import MemoryReset, arm_file, arm_name, compare
 from rmbench.eval.seeds import verified_seeds
 from rmbench.eval.worker import close_worker, episodes_job, policy_batches
-from rmbench.files import write_atomic, write_json
+from rmbench.files import read_json_object, write_atomic, write_json
 from rmbench.identity import differences
 from rmbench.parallel import BACKENDS, in_order, make_executor
-from rmbench.policies.registry import parse_spec
+from rmbench.policies.registry import check_policy, env_options, parse_spec
 from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
@@ -118,22 +119,36 @@ class EvalConfig:
         return ident
 
 
-def read_records(path: Path) -> list[dict]:
-    """Complete records of a JSONL file; a torn last line (a killed writer) is cut off."""
+# what every episode record holds (eval/episode.py), and what summaries and reports read
+RECORD_KEYS = ("seed", "success", "reason", "progress")
+
+
+def read_records(path: Path, repair: bool = False) -> list[dict]:
+    """The episode records of a JSONL file. Its last line may be torn (a writer killed
+    mid-line leaves no newline after it): that line is left out, and with ``repair`` (the
+    evaluation about to append) cut off the file. Any other line that is not a record is an
+    EvalError naming the file and line, and the file is left as it is: a damaged middle is
+    never cut away with the complete records after it."""
     if not path.exists():
         return []
     data = path.read_bytes()
     records, good = [], 0
-    for line in data.splitlines(keepends=True):
-        if not line.endswith(b"\n"):
-            break
+    lines = data.splitlines(keepends=True)
+    for n, line in enumerate(lines, 1):
+        if not line.endswith(b"\n") and n == len(lines):
+            break  # torn
         try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            break
+            record = json.loads(line)
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            record = None
+        if not (isinstance(record, dict) and all(k in record for k in RECORD_KEYS)):
+            raise EvalError(f"{path}: line {n} is not an episode record (a record is one JSON "
+                            f"object a line with {', '.join(RECORD_KEYS)}); mend or move the "
+                            f"file") from None
+        records.append(record)
         good += len(line)
-    if good < len(data):
-        log.warning("%s: dropping an incomplete last record", path)
+    if good < len(data) and repair:
+        log.warning("%s: dropping a torn last record (its writer was stopped)", path)
         with open(path, "r+b") as f:
             f.truncate(good)
     return records
@@ -164,18 +179,36 @@ def summarize(task: str, records: list[dict]) -> TaskResult:
 
 
 def _check_identity(out: Path, cfg: EvalConfig) -> None:
+    """``out`` holds this evaluation (its ``run.json``), or none yet: a folder whose run.json
+    says other arguments is refused while any episode is recorded under it, and taken over
+    when none is (a run that stopped before its first episode, on a bad checkpoint say)."""
     path = out / "run.json"
     if path.exists():
-        what = differences(json.loads(path.read_text()), cfg.identity())
-        if what:
+        what = differences(read_json_object(path), cfg.identity())
+        if not what:
+            return
+        if any(p.stat().st_size for p in out.glob("*/*.jsonl")):
             raise EvalError(f"{out} holds an evaluation with other arguments ({what}); use "
                             f"another --out")
-    else:
-        write_json(path, cfg.identity(), indent=2)
+    write_json(path, cfg.identity(), indent=2)
+
+
+def _check_inputs(cfg: EvalConfig) -> None:
+    """What the evaluation reads before it writes anything: the policy spec (with a
+    checkpoint, its config; a remote policy, its server's answer) and the datasets whose seeds
+    it plays, so that a typo is a one-line error and not a folder of failed episodes."""
+    check_policy(cfg.policy)
+    env_options(cfg.policy)
+    entry, arg = parse_spec(cfg.policy)
+    source = arg if entry.name == "replay" else cfg.seeds_of
+    if source is not None:
+        for task in cfg.tasks:
+            dataset_seeds(source, task)
 
 
 def evaluate(cfg: EvalConfig) -> dict[str, Any]:
     out = Path(cfg.out)
+    _check_inputs(cfg)
     out.mkdir(parents=True, exist_ok=True)
     _check_identity(out, cfg)
     results = {}
@@ -250,7 +283,7 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
     """The seeds' episodes not yet recorded, into the ordinary arm or ``probe``'s (whose
     episodes keep no video: the ordinary arm's show the same layouts)."""
     path = folder / (arm_file(probe.name) if probe else "episodes.jsonl")
-    records = [r for r in read_records(path) if r["seed"] in seeds]
+    records = [r for r in read_records(path, repair=True) if r["seed"] in seeds]
     done = {r["seed"] for r in records}
     todo = [(i, s) for i, s in enumerate(seeds) if s not in done]
     n_todo = len(todo)

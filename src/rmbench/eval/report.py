@@ -13,14 +13,13 @@ the average's own where the tasks' rates differ). A folder with a memory probe
 from __future__ import annotations
 
 import html
-import json
 from pathlib import Path
 
 from rmbench.eval import published as _published
 from rmbench.eval.chance import chance
 from rmbench.eval.harness import drop_text, rate_text, read_records
 from rmbench.eval.intervals import wilson
-from rmbench.files import write_atomic
+from rmbench.files import read_json_object, write_atomic
 from rmbench.tasks.registry import ordered
 
 # Success rates (%) of the paper's main results table, per policy and task (eval/published.py)
@@ -70,7 +69,7 @@ def load_runs(folders: list[str | Path], labels: list[str] | None = None) -> lis
         path = Path(folder) / "summary.json"
         if not path.exists():
             raise ValueError(f"{folder}: no summary.json (not an `rmbench eval` folder)")
-        summary = json.loads(path.read_text())
+        summary = read_json_object(path, ("policy", "tasks"))
         videos = {}
         for task in summary["tasks"]:
             for r in read_records(Path(folder) / task / "episodes.jsonl"):

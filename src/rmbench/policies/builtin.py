@@ -67,13 +67,17 @@ class ReplayPolicy(BasePolicy):
         for e, row in enumerate(self.ds.episodes):
             self.by_seed.setdefault(int(row["rmbench/seed"]), e)
         self.seeds = list(self.by_seed)
+        # read now, so that a damaged dataset stops the evaluation (a DatasetError) instead of
+        # being recorded as the policy failing its episodes
+        self.recorded = {seed: self.ds.episode(e, cameras=[]).action.astype(np.float64)
+                         for seed, e in self.by_seed.items()}
         self._actions: np.ndarray | None = None
 
     def reset(self, instruction, task_info):
         seed = task_info.get("seed")
-        if seed not in self.by_seed:
+        if seed not in self.recorded:
             raise ValueError(f"the replay dataset has no episode with seed {seed}")
-        self._actions = self.ds.episode(self.by_seed[seed], cameras=[]).action.astype(np.float64)
+        self._actions = self.recorded[seed]
 
     def act(self, observation):
         if self._actions is None:
@@ -101,6 +105,17 @@ def _checkpoint_config(arg: str | None) -> dict[str, Any] | None:
         return config["config"] if isinstance(config["config"], dict) else None
     except (OSError, ValueError, KeyError, TypeError):
         return None
+
+
+def checkpoint_check(policy: str):
+    """A learned policy's ``check``: its checkpoint's config.json is there, readable and of
+    that policy (``checkpoint.read_config``'s one-line errors)."""
+    def check(arg: str | None) -> None:
+        from rmbench.policies.checkpoint import read_config
+
+        read_config(split_argument(arg)[0], policy)
+
+    return check
 
 
 def checkpoint_observation(arg: str | None) -> str | None:
@@ -143,7 +158,7 @@ def _mem0_reads_simulator(arg: str | None) -> bool:
 
 register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&execute=N&flow_steps=N]",
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
-                reads_simulator=_mem0_reads_simulator)(_mem0)
+                reads_simulator=_mem0_reads_simulator, check=checkpoint_check("mem0"))(_mem0)
 
 
 def _dp(arg, env):
@@ -159,6 +174,8 @@ def _act(arg, env):
 
 
 register_policy("dp", "Diffusion Policy from a checkpoint: dp:CKPT[?execute=N&ddim_steps=N]",
-                needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras)(_dp)
+                needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
+                check=checkpoint_check("dp"))(_dp)
 register_policy("act", "ACT from a checkpoint: act:CKPT[?temporal_ensemble=M&execute=N]",
-                needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras)(_act)
+                needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
+                check=checkpoint_check("act"))(_act)

@@ -22,6 +22,9 @@ from rmbench.files import write_atomic, write_json
 from rmbench.tasks.registry import recorded_gym_id
 
 FORMAT = 1
+# what every checkpoint's config.json holds beside its format (the training loop's), and what
+# a policy's adds (the task it learned and its config: ``visuomotor``, ``mem0.train``)
+REQUIRED, POLICY_REQUIRED = ("policy", "step"), ("task", "config")
 WEIGHTS, CONFIG = "model.safetensors", "config.json"
 
 
@@ -38,17 +41,25 @@ def save_checkpoint(folder: str | Path, model: torch.nn.Module, config: dict[str
 
 
 def read_config(folder: str | Path, policy: str | None = None) -> dict[str, Any]:
+    """A checkpoint's config.json (with ``policy``, of that policy, its task and config
+    recorded); a one-line CheckpointError naming the file for anything else."""
     path = Path(folder) / CONFIG
     if not path.is_file():
         raise CheckpointError(f"{folder}: not a checkpoint (no {CONFIG})")
     try:
         config = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as err:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise CheckpointError(f"{path}: unreadable ({err})") from None
+    if not isinstance(config, dict):
+        raise CheckpointError(f"{path}: holds a JSON {type(config).__name__}, not an object")
     if config.get("format") != FORMAT:
         raise CheckpointError(f"{path}: checkpoint format {config.get('format')!r}, expected {FORMAT}")
     if policy is not None and config.get("policy") != policy:
         raise CheckpointError(f"{folder} is a {config.get('policy')!r} checkpoint, not {policy!r}")
+    missing = [k for k in REQUIRED + (POLICY_REQUIRED if policy else ()) if k not in config]
+    if missing or (policy and not isinstance(config["config"], dict)):
+        raise CheckpointError(f"{path}: no {', '.join(map(repr, missing or ['config']))} "
+                              f"{'field' if len(missing) < 2 else 'fields'} (damaged)")
     return config
 
 

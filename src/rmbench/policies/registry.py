@@ -55,6 +55,9 @@ class PolicyEntry:
     # from its argument: the rmbench.make options, when only the policy can say (a remote
     # policy asks its server); supersedes cameras and obs_type
     env_options: Callable[[str | None], dict[str, Any]] | None = None
+    # from its argument: raise a one-line error where the policy cannot be built from it (a
+    # checkpoint that is not there), cheaply and before anything runs
+    check: Callable[[str | None], None] | None = None
 
 
 POLICIES: dict[str, PolicyEntry] = {}
@@ -64,13 +67,14 @@ def register_policy(name: str, help: str, needs_argument: bool = False,
                     cameras: Cameras | Callable[[str | None], Cameras] = None,
                     obs_type: ObsType | None = None,
                     reads_simulator: Callable[[str | None], bool] | None = None,
-                    env_options: Callable[[str | None], dict[str, Any]] | None = None):
+                    env_options: Callable[[str | None], dict[str, Any]] | None = None,
+                    check: Callable[[str | None], None] | None = None):
     def wrap(factory: PolicyFactory) -> PolicyFactory:
         if name in POLICIES:
             raise ValueError(f"policy {name!r} is already registered")
         fixed = tuple(cameras) if cameras is not None and not callable(cameras) else cameras
         POLICIES[name] = PolicyEntry(name, factory, help, needs_argument, fixed, obs_type,
-                                     reads_simulator, env_options)
+                                     reads_simulator, env_options, check)
         return factory
 
     return wrap
@@ -94,6 +98,14 @@ def parse_spec(spec: str) -> tuple[PolicyEntry, str | None]:
     if not entry.needs_argument and sep:
         raise UnknownPolicyError(f"policy {name!r} takes no argument, got {spec!r}")
     return entry, (arg or None)
+
+
+def check_policy(spec: str) -> None:
+    """A one-line error for a spec no policy can be built from: an unknown name, a missing
+    argument, or an argument its registration's ``check`` refuses; nothing is built."""
+    entry, arg = parse_spec(spec)
+    if entry.check is not None:
+        entry.check(arg)
 
 
 def env_options(spec: str) -> dict[str, Any]:

@@ -1,0 +1,38 @@
+"""A checkpoint's config.json read back: every damage a one-line CheckpointError naming it."""
+
+import json
+
+import pytest
+
+from rmbench.policies.builtin import checkpoint_check
+from rmbench.policies.checkpoint import FORMAT, CheckpointError, read_config
+from rmbench.policies.registry import check_policy
+
+GOOD = {"format": FORMAT, "policy": "dp", "task": "put_back_block", "config": {"dim": 8},
+        "step": 10}
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[1]", r"config\.json: holds a JSON list, not an object"),
+    ("{bad", r"config\.json: unreadable"),
+    (json.dumps({k: v for k, v in GOOD.items() if k != "step"}), r"no 'step' field"),
+    (json.dumps({k: v for k, v in GOOD.items() if k not in ("task", "config")}),
+     r"no 'task', 'config' fields"),
+    (json.dumps({**GOOD, "config": [1]}), r"no 'config' field"),
+    (json.dumps({**GOOD, "policy": "act"}), r"is a 'act' checkpoint, not 'dp'"),
+])
+def test_a_damaged_config_is_a_checkpoint_error_naming_it(tmp_path, text, message):
+    (tmp_path / "config.json").write_text(text)
+    with pytest.raises(CheckpointError, match=message):
+        read_config(tmp_path, "dp")
+
+
+def test_a_learned_policy_spec_is_checked_without_building_it(tmp_path):
+    (tmp_path / "config.json").write_text(json.dumps(GOOD))
+    assert read_config(tmp_path, "dp")["step"] == 10
+    checkpoint_check("dp")(f"{tmp_path}?execute=4")  # options aside
+    check_policy(f"dp:{tmp_path}")
+    with pytest.raises(CheckpointError, match="not a checkpoint"):
+        check_policy(f"mem0:{tmp_path / 'missing'}")
+    with pytest.raises(CheckpointError, match="is a 'dp' checkpoint, not 'act'"):
+        check_policy(f"act:{tmp_path}")
