@@ -65,12 +65,22 @@ def test_different_seeds_differ(task_name):
     (np.zeros((2, 14)), "shape"),
     (np.full(14, np.nan), "NaN"),
     (np.r_[np.zeros(13), np.inf], "NaN/inf at indices \\[13\\]"),
+    (np.zeros(14) + 1j, "real numbers, got complex128"),
+    (["0"] * 14, "real numbers"),
+    ([None] * 14, "real numbers, got object"),
+    ({"a": 1}, "real numbers"),
 ])
 def test_bad_actions_raise_value_error(bad, message):
     env = rmbench.make("put_back_block", render=False)
     env.reset(seed=0)
     with pytest.raises(ValueError, match=message):
         env.step(bad)
+
+
+@pytest.mark.parametrize("limit", [0, -1, 2.5, True, "100"])
+def test_a_step_limit_is_a_whole_number_of_steps(limit):
+    with pytest.raises(ValueError, match="step_limit must be a whole number >= 1"):
+        rmbench.make("put_back_block", render=False, step_limit=limit)
 
 
 def test_targets_beyond_limits_are_clipped_and_counted():

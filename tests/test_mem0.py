@@ -489,7 +489,7 @@ def test_vlm_planner_backend_trains_with_lora(mn_dataset, tmp_path):
     env.close()
 
 
-def test_open_loop_error_walks_the_agent_over_recorded_frames(mn_ckpt, mn_dataset):
+def test_open_loop_error_walks_the_agent_over_recorded_frames(mn_ckpt, mn_dataset, dataset):
     from rmbench.eval.open_loop import open_loop_error
 
     hold = open_loop_error("noop", str(mn_dataset), [0, 1])
@@ -502,6 +502,10 @@ def test_open_loop_error_walks_the_agent_over_recorded_frames(mn_ckpt, mn_datase
     assert np.isfinite(mem0["error"]) and mem0["error"] != mem0["hold_error"]
     with pytest.raises(ValueError, match="episode 5 is not in"):
         open_loop_error("noop", str(mn_dataset), [5])
+    other = Dataset(dataset).task  # another task's demonstrations are refused
+    assert other != Dataset(mn_dataset).task
+    with pytest.raises(ValueError, match=f"was trained on .*; .* holds {other} demonstrations"):
+        open_loop_error(f"mem0:{mn_ckpt}", str(dataset), [0])
 
 
 # ------------------------------------------------------------------ the state observation

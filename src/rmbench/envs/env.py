@@ -51,6 +51,10 @@ class RMBenchEnv(gym.Env):
         task_cls = get_task(task) if isinstance(task, str) else task
         if obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type must be one of {list(OBS_TYPES)}, got {obs_type!r}")
+        if step_limit is not None and (isinstance(step_limit, bool) or not
+                                       isinstance(step_limit, int | np.integer) or step_limit < 1):
+            raise ValueError(f"step_limit must be a whole number >= 1 (None: the task's "
+                             f"{task_cls.step_limit}), got {step_limit!r}")
         self.obs_type = obs_type
         self.with_state = "environment_state" in obs_type
         if render is None:  # cameras on exactly when the observation holds pixels
@@ -169,7 +173,10 @@ class RMBenchEnv(gym.Env):
                 "subtask_index": idx, "subtask_step": ev.stage, "subtask_end": ended}
 
     def _validate(self, action) -> np.ndarray:
-        a = np.asarray(action, dtype=np.float64)
+        raw = np.asarray(action)
+        if raw.dtype.kind not in "biuf":  # (numpy would drop a complex part with a warning)
+            raise ValueError(f"action must hold real numbers, got {raw.dtype} values")
+        a = raw.astype(np.float64)
         if a.shape != (ACTION_DIM,):
             raise ValueError(f"action must have shape ({ACTION_DIM},), got {a.shape}")
         if not np.isfinite(a).all():

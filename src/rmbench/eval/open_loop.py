@@ -27,11 +27,17 @@ def open_loop_error(spec: str, dataset: str, episodes: list[int]) -> dict[str, A
     bad = [e for e in episodes if not 0 <= e < ds.num_episodes]
     if bad:
         raise ValueError(f"episode {bad[0]} is not in {dataset} ({ds.num_episodes} episodes)")
+    policy = make_policy(spec, None)
+    # built without an env, a learned policy cannot check its task against one: against the
+    # demonstrations' here (its checkpoint's description names the task it learned)
+    trained = (getattr(policy, "describe", None) or {}).get("task")
     cameras = policy_cameras(spec)
     missing = sorted(set(cameras) - set(ds.cameras))
-    if missing:
-        raise ValueError(f"{spec} reads camera {missing[0]!r}, which {dataset} does not hold")
-    policy = make_policy(spec, None)
+    if (trained is not None and trained != ds.task) or missing:
+        policy.close()
+        raise ValueError(f"{spec} reads camera {missing[0]!r}, which {dataset} does not hold"
+                         if missing else f"{spec} was trained on {trained}; {dataset} holds "
+                         f"{ds.task} demonstrations")
     # frames at the size the learned policies were trained on; others get the dataset's own
     cfg = getattr(policy, "cfg", None)
     size = tuple(cfg.image_size) if cameras and hasattr(cfg, "image_size") else None
