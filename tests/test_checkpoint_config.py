@@ -36,3 +36,15 @@ def test_a_learned_policy_spec_is_checked_without_building_it(tmp_path):
         check_policy(f"mem0:{tmp_path / 'missing'}")
     with pytest.raises(CheckpointError, match="is a 'dp' checkpoint, not 'act'"):
         check_policy(f"act:{tmp_path}")
+
+
+def test_weights_of_another_shape_name_the_tensor(tmp_path):
+    import torch
+
+    from rmbench.policies.checkpoint import load_weights, save_checkpoint
+
+    save_checkpoint(tmp_path, torch.nn.Linear(3, 4), {"policy": "line"}, step=2)
+    load_weights(tmp_path, torch.nn.Linear(3, 4), 2)
+    with pytest.raises(CheckpointError, match=r"weight is \(4, 3\), the model's \(5, 3\) "
+                                              r"\(2 tensors of other shapes\)"):
+        load_weights(tmp_path, torch.nn.Linear(3, 5), 2)

@@ -117,10 +117,16 @@ def load_weights(folder: str | Path, model: torch.nn.Module, step: int) -> None:
     if missing or unexpected:
         raise CheckpointError(f"{path}: weights do not fit the model (missing {sorted(missing)[:3]}, "
                               f"unexpected {sorted(unexpected)[:3]})")
+    own = model.state_dict()
+    wrong = [k for k in own if tuple(state[k].shape) != tuple(own[k].shape)]
+    if wrong:  # (torch's own error spans lines; the first wrong tensor says enough)
+        k = wrong[0]
+        raise CheckpointError(f"{path}: {k} is {tuple(state[k].shape)}, the model's "
+                              f"{tuple(own[k].shape)} ({len(wrong)} tensors of other shapes)")
     try:
         model.load_state_dict(state)
     except RuntimeError as err:
-        raise CheckpointError(f"{path}: {str(err).splitlines()[0]}") from None
+        raise CheckpointError(f"{path}: {' '.join(str(err).split())}") from None
 
 
 def _metadata(data: bytes) -> dict[str, str]:
