@@ -132,6 +132,27 @@ def test_resume_after_a_crash_mid_commit(dataset, tmp_path, monkeypatch):
     check_dataset(out)
 
 
+def test_a_collection_stopped_at_its_start_resumes(dataset, tmp_path, monkeypatch):
+    out = tmp_path / "ds"
+    real = writer.write_parquet
+
+    def crash_on_first_table(path, table):
+        raise KeyboardInterrupt  # killed after meta/rmbench.json, before the task tables
+
+    monkeypatch.setattr(writer, "write_parquet", crash_on_first_table)
+    with pytest.raises(KeyboardInterrupt):
+        collect(small(out))
+    (out / "meta" / ".tasks.parquet.999999999.tmp").write_bytes(b"x")  # a dead writer's
+    monkeypatch.setattr(writer, "write_parquet", real)
+    assert collect(small(out)).new_episodes == 3
+    assert contents(out) == contents(dataset) and not list(out.rglob(".*.tmp"))
+    # a folder holding nothing but such leftovers is taken as empty
+    bare = tmp_path / "bare"
+    (bare / "meta").mkdir(parents=True)
+    (bare / "meta" / ".rmbench.json.999999999.tmp").write_bytes(b"x")
+    assert collect(small(bare, episodes=1)).new_episodes == 1
+
+
 def test_sigkill_and_resume_loses_and_duplicates_nothing(dataset, tmp_path):
     out = tmp_path / "ds"
     cmd = [sys.executable, "-m", "rmbench.cli.main", "collect", TASK, "--episodes", "3",

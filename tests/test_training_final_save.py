@@ -134,3 +134,68 @@ def test_a_finished_training_rewrites_a_missing_or_torn_checkpoint(reference, tm
     assert saved_step(out) is None
     assert run(out)["resumed_from"] == STEPS  # nothing is trained again
     same_checkpoint(out, reference)
+
+
+@pytest.mark.parametrize("die_after", range(3))  # loss.csv, weights, config: no state yet
+def test_a_kill_inside_the_first_save_begins_again(reference, tmp_path, monkeypatch, die_after):
+    out = tmp_path / "first"
+    writes: list[str] = []
+    first = {"on": False}
+    save, write = loop._save, loop.write_atomic
+
+    def tracked_save(out, model, opt, identity, kept, *args):
+        first["on"] = kept.step == SAVE_EVERY
+        save(out, model, opt, identity, kept, *args)
+
+    def tracked_write(path, data):
+        if first["on"] and len(writes) == die_after:
+            # what a SIGKILL inside the rename leaves: the temporary file of a dead process
+            (path.parent / f".{path.name}.999999999.tmp").write_bytes(data[:10])
+            raise Killed
+        write(path, data)
+        if first["on"]:
+            writes.append(path.name)
+
+    monkeypatch.setattr(loop, "_save", tracked_save)
+    monkeypatch.setattr(loop, "write_atomic", tracked_write)
+    monkeypatch.setattr(checkpoint, "write_atomic", tracked_write)
+    with pytest.raises(Killed):
+        run(out)
+    assert not (out / loop.STATE).exists() and any(out.rglob(".*.tmp"))
+    monkeypatch.undo()
+    assert run(out)["resumed_from"] == 0  # this folder's own run, begun again
+    same_checkpoint(out, reference)
+    assert not list(out.rglob(".*.tmp"))  # the dead writer's leftovers are gone
+    # another run's arguments on that folder are still refused
+    (out / loop.STATE).unlink()
+    with pytest.raises(loop.TrainingError, match="other arguments"):
+        train(Line(), batches, TrainConfig(steps=STEPS + 1, save_every=SAVE_EVERY), out,
+              {"policy": "line"}, progress=False, write_checkpoint=save_checkpoint)
+
+
+def test_a_finished_training_redraws_a_stale_curve(reference, tmp_path):
+    import os
+    import shutil
+
+    out = tmp_path / "done"
+    shutil.copytree(reference, out)
+    png = out / loop.CURVE_PNG
+    png.write_bytes(b"stale")
+    os.utime(png, ns=(0, 0))  # older than loss.csv: the run stopped before its plot
+    run(out)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_resume_on_another_thread_count_says_so(tmp_path, caplog):
+    out = tmp_path / "t"
+    train(Line(), batches, TrainConfig(steps=SAVE_EVERY, save_every=SAVE_EVERY), out,
+          {"policy": "line"}, progress=False, write_checkpoint=save_checkpoint)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(threads + 1)
+    try:
+        with caplog.at_level("WARNING"):
+            train(Line(), batches, TrainConfig(steps=SAVE_EVERY, save_every=SAVE_EVERY), out,
+                  {"policy": "line"}, progress=False, write_checkpoint=save_checkpoint)
+    finally:
+        torch.set_num_threads(threads)
+    assert f"resumed on {threads + 1} torch threads where it saved on {threads}" in caplog.text

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -30,6 +31,35 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+_LEFTOVER = re.compile(r"^\..+\.(\d+)\.tmp(\.\w+)?$")  # atomic_path's temporary names
+
+
+def remove_leftovers(folder: str | Path, recursive: bool = False) -> int:
+    """Delete the temporary files that writers killed before their rename left in ``folder``
+    (``atomic_path``'s names, of processes no longer running: a live writer's are its own);
+    how many."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return 0
+    removed = 0
+    for path in (folder.rglob(".*.tmp*") if recursive else folder.glob(".*.tmp*")):
+        m = _LEFTOVER.match(path.name)
+        if m and path.is_file() and not _running(int(m.group(1))):
+            path.unlink(missing_ok=True)
+            removed += 1
+    return removed
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
 
 
 def write_atomic(path: str | Path, data: bytes) -> None:

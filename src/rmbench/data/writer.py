@@ -24,7 +24,14 @@ import pyarrow.parquet as pq
 from rmbench.data import layout as L
 from rmbench.data.record import EpisodeRecord
 from rmbench.data.stats import aggregate, array_stats, pop_stats, to_json
-from rmbench.files import FileFormatError, atomic_path, read_json_object, write_atomic, write_json
+from rmbench.files import (
+    FileFormatError,
+    atomic_path,
+    read_json_object,
+    remove_leftovers,
+    write_atomic,
+    write_json,
+)
 from rmbench.identity import differences
 from rmbench.tasks import get_task
 
@@ -111,11 +118,12 @@ class DatasetWriter:
         # Record observation.environment_state; False when extending a dataset whose
         # episodes were collected before that column existed.
         self.environment_state = True
+        remove_leftovers((self.root / L.RMBENCH).parent)  # (data and videos: _resume's own)
         if overwrite and self.root.exists():
             self._remove()
         if (self.root / L.RMBENCH).exists():
             self._resume()
-        elif self.root.exists() and any(self.root.iterdir()):
+        elif self.root.exists() and any(p.is_file() for p in self.root.rglob("*")):
             raise DatasetError(f"{self.root} exists, is not empty and holds no rmbench dataset "
                                f"({L.RMBENCH} is missing); choose another --out")
         self._write_dataset_meta()
@@ -201,6 +209,12 @@ class DatasetWriter:
         }
         tasks = pd.DataFrame({"task_index": np.arange(len(self.instructions), dtype=np.int64)},
                              index=pd.Index(self.instructions, name="task"))
+        # rmbench.json first: a folder stopped anywhere after it is known as this dataset's
+        write_json(self.root / L.RMBENCH, {
+            "format": L.FORMAT, "task": self.task.name, "gym_id": self.task.gym_id,
+            "tmc": self.task.tmc, "step_limit": self.task.step_limit,
+            "subtasks": list(self.task.subtasks), "collection": self.collection,
+            "episodes": n, "skipped": self.skipped}, indent=2)
         write_parquet(self.root / L.TASKS, pa.Table.from_pandas(tasks))
         # LeRobot's own subtask table: text as the index, so a frame's ``subtask_index``
         # gives ``item["subtask"]`` in LeRobotDataset.
@@ -208,11 +222,6 @@ class DatasetWriter:
                                 index=pd.Index(list(self.task.subtasks), name="subtask"))
         write_parquet(self.root / L.SUBTASKS, pa.Table.from_pandas(subtasks))
         write_json(self.root / L.STATS, to_json(aggregate(self._stats)), indent=2)
-        write_json(self.root / L.RMBENCH, {
-            "format": L.FORMAT, "task": self.task.name, "gym_id": self.task.gym_id,
-            "tmc": self.task.tmc, "step_limit": self.task.step_limit,
-            "subtasks": list(self.task.subtasks), "collection": self.collection,
-            "episodes": n, "skipped": self.skipped}, indent=2)
         write_json(self.root / L.INFO, info, indent=2)  # last: a reader sees counts that match the files
 
     # ----------------------------------------------------------------- resume
@@ -273,7 +282,8 @@ class DatasetWriter:
         return removed
 
     def _remove(self) -> None:
-        if any(self.root.iterdir()) and not (self.root / L.RMBENCH).exists():
+        if (not (self.root / L.RMBENCH).exists()
+                and any(p.is_file() for p in self.root.rglob("*"))):
             raise DatasetError(f"refusing to delete {self.root}: it is not an rmbench dataset")
         shutil.rmtree(self.root)
 

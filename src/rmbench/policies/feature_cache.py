@@ -31,6 +31,7 @@ import torch
 
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, FrameCache, cache_file, save_atomic
+from rmbench.files import remove_leftovers
 from rmbench.policies.nn.backbone import FEATURE_DTYPE, backbone_features, feature_shape
 from rmbench.policies.nn.inference import INFERENCE_THREADS, intra_op_threads
 
@@ -110,6 +111,8 @@ class FeatureCache:
     def encode(self, todo: list[tuple[int, str]], workers: int = 1) -> int:
         """Encode the (episode, camera) pairs ``todo`` (``missing``'s answer), in ``workers``
         processes (each writes its own files, atomically); how many."""
+        for camera in {c for _, c in todo}:  # what encoders killed before a rename left
+            remove_leftovers(self.dir / camera)
         done = (self._in_workers(todo, min(workers, len(todo))) if workers > 1 and len(todo) > 1
                 else (self._ensure(e, c) for e, c in todo))
         for n, _ in enumerate(done, 1):

@@ -101,7 +101,12 @@ def feature_caches(plan: Plan, out: Path, task: str) -> list[tuple[Any, tuple[li
 
 
 def trained(plan: Plan, out: Path, task: str, spec: str) -> bool:
-    return read_json(plan.train_dir(out, task, spec) / "config.json", {}).get("step") == plan.steps
+    """Whether the cell's training is done: its checkpoint of the plan's steps, and the
+    stage's clock, which ``train_stage`` writes last (a training stopped between its
+    checkpoint and its state, or before its bookkeeping, is finished by running it again)."""
+    folder = plan.train_dir(out, task, spec)
+    return (read_json(folder / "config.json", {}).get("step") == plan.steps
+            and (folder / TIMING).exists())
 
 
 def evaluated(plan: Plan, out: Path, task: str, spec: str) -> dict | None:

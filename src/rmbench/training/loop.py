@@ -41,7 +41,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from rmbench.files import write_atomic
+from rmbench.files import remove_leftovers, write_atomic, write_json
 from rmbench.identity import differences
 from rmbench.machine import describe as describe_machine
 from rmbench.tasks.registry import recorded_gym_id
@@ -50,6 +50,9 @@ from rmbench.training.device import check_device, flush_denormals
 log = logging.getLogger(__name__)
 
 STATE = Path("training") / "state.pt"
+# the run's identity, written before anything else of a new run: a folder whose first save
+# was interrupted (a checkpoint, no state yet) is then known as this run's and begun again
+STARTED = Path("training") / "started.json"
 CURVE_CSV = Path("training") / "loss.csv"
 CURVE_PNG = Path("training") / "loss.png"
 
@@ -189,12 +192,19 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     defaults = json.loads(json.dumps(config_defaults or {}))
     kept = _resume(out, model, opt, identity, defaults, device)
     start = kept.step
+    if dist.rank == 0:
+        for folder in (out, out / STATE.parent):  # what writers killed before a rename left
+            remove_leftovers(folder)
+        if start == 0:
+            write_json(out / STARTED, identity)
     if start >= cfg.steps:
         log.info("%s: already trained for %d steps", out, start)
         if dist.rank == 0 and checkpoint_step is not None and checkpoint_step(out) != start:
             log.warning("%s: the checkpoint of step %d is missing or torn: written again from "
                         "the training state", out, start)
             _export(out, model, identity, start, write_checkpoint)
+        if dist.rank == 0 and _stale(out / CURVE_PNG, out / CURVE_CSV):
+            _plot_curve(out)  # (a run stopped between its last state and its plot)
         return {"steps": start, "resumed_from": start, **kept.timing()}
     here = describe_machine()
     if device.type == "cuda":
@@ -253,7 +263,7 @@ def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dic
              "wall_s": kept.wall_s, "wall_from": kept.wall_from,
              "machines": json.dumps(kept.machines),
              "model": model.state_dict(), "optimizer": opt.state_dict(),
-             "rng": torch.get_rng_state(),
+             "rng": torch.get_rng_state(), "threads": torch.get_num_threads(),
              "extra": model.extra_state() if hasattr(model, "extra_state") else {}}
     if torch.cuda.is_available():
         state["cuda_rng"] = torch.cuda.get_rng_state_all()
@@ -277,6 +287,17 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
             config_defaults: dict, device: torch.device) -> Kept:
     path = out / STATE
     if not path.exists():
+        if (out / STARTED).exists():  # this folder's run stopped before its first save ended
+            try:
+                started = json.loads((out / STARTED).read_text())
+            except (OSError, json.JSONDecodeError) as err:
+                raise TrainingError(f"{out / STARTED}: unreadable ({err})") from None
+            what = run_differences(started, identity, config_defaults)
+            if what:
+                raise TrainingError(f"{out} holds a training run with other arguments "
+                                    f"({what}); use another --out")
+            log.warning("%s: its run stopped before its first save; begun again", out)
+            return Kept()
         if (out / "config.json").exists() or (out.exists() and any(out.iterdir())):
             raise TrainingError(f"{out} exists and holds no training state; use another --out")
         return Kept()
@@ -293,6 +314,10 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
     if hasattr(model, "load_extra_state"):
         model.load_extra_state(state["extra"])
     log.info("%s: resuming at step %d", out, state["step"])
+    if state.get("threads", torch.get_num_threads()) != torch.get_num_threads():
+        log.warning("%s: resumed on %d torch threads where it saved on %d: sums in another order "
+                    "round differently, so its weights will differ in their last bits from an "
+                    "uninterrupted run's", out, torch.get_num_threads(), state["threads"])
     step = int(state["step"])
     if "wall_s" not in state:  # saved before wall times were kept: they count from here
         return Kept(step, 0.0, step)
@@ -350,6 +375,12 @@ def _append_curve(out: Path, rows: list[dict], step: int) -> None:
     writer.writeheader()
     writer.writerows(allrows)
     write_atomic(path, buf.getvalue().encode())
+
+
+def _stale(made: Path, source: Path) -> bool:
+    """Whether ``made`` is missing or older than ``source`` (which exists)."""
+    return source.exists() and (not made.exists()
+                                or made.stat().st_mtime_ns < source.stat().st_mtime_ns)
 
 
 def _plot_curve(out: Path) -> None:

@@ -1,0 +1,32 @@
+"""Atomic files: leftovers of killed writers, and JSON read back with a one-line error."""
+
+import os
+
+import pytest
+
+from rmbench.files import FileFormatError, read_json_object, remove_leftovers
+
+
+def test_only_dead_writers_leftovers_are_removed(tmp_path):
+    (tmp_path / "sub").mkdir()
+    dead = [tmp_path / ".state.pt.999999999.tmp", tmp_path / "sub" / ".f.npy.999999998.tmp.npy"]
+    live = tmp_path / f".config.json.{os.getpid()}.tmp"  # a writer still at work
+    kept = [tmp_path / "state.pt", tmp_path / ".hidden", live]
+    for path in dead + kept:
+        path.write_bytes(b"x")
+    assert remove_leftovers(tmp_path) == 1 and not dead[0].exists() and dead[1].exists()
+    assert remove_leftovers(tmp_path, recursive=True) == 1 and not dead[1].exists()
+    assert all(path.exists() for path in kept)
+    assert remove_leftovers(tmp_path / "missing") == 0
+
+
+@pytest.mark.parametrize("text, message", [
+    ("{bad", "not readable JSON"), ("[1]", "holds a JSON list, not an object"),
+    ('{"a": 1}', "no 'b' field")])
+def test_a_json_object_read_back_names_its_file(tmp_path, text, message):
+    path = tmp_path / "x.json"
+    path.write_text(text)
+    with pytest.raises(FileFormatError, match=f"x.json: {message}"):
+        read_json_object(path, ("a", "b"))
+    path.write_text('{"a": 1, "b": 2}')
+    assert read_json_object(path, ("a", "b")) == {"a": 1, "b": 2}
