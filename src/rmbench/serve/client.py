@@ -67,8 +67,12 @@ class RemotePolicy(BasePolicy):
         self._connect()
 
     def _connect(self) -> None:
-        self.ws = self._stack.enter_context(connect(
-            self.url, max_size=MAX_MESSAGE_BYTES, open_timeout=self.timeout, compression=None))
+        try:
+            self.ws = self._stack.enter_context(connect(
+                self.url, max_size=MAX_MESSAGE_BYTES, open_timeout=self.timeout,
+                compression=None))
+        except OSError as err:  # (refused, no such host): the address said with the reason
+            raise ConnectionError(f"{self.url}: {err.strerror or err}") from None
         try:
             metadata = unpack(self.ws.recv(timeout=self.timeout))
         except Exception:
