@@ -66,19 +66,21 @@ def reference(tmp_path_factory):
     return out
 
 
-def final_save_writes(monkeypatch, die_after: int | None) -> list[str]:
-    """Patches the loop so that its final save dies after ``die_after`` of its file writes
-    (None: never); returns the list the final save's writes are named in."""
+def final_save_writes(monkeypatch, die_after: int | None, at: int = STEPS) -> list[str]:
+    """Patches the loop so that its save of step ``at`` (the final one) dies after
+    ``die_after`` of its file writes (None: never), leaving the dying write's temporary file
+    as a SIGKILL inside its rename would; returns the list that save's writes are named in."""
     writes: list[str] = []
     final = {"on": False}
     save, write = loop._save, loop.write_atomic
 
     def tracked_save(out, model, opt, identity, kept, *args):
-        final["on"] = kept.step == STEPS
+        final["on"] = kept.step == at
         save(out, model, opt, identity, kept, *args)
 
     def tracked_write(path, data):
         if final["on"] and die_after is not None and len(writes) == die_after:
+            (path.parent / f".{path.name}.999999999.tmp").write_bytes(data[:10])
             raise Killed
         write(path, data)
         if final["on"]:
@@ -139,26 +141,7 @@ def test_a_finished_training_rewrites_a_missing_or_torn_checkpoint(reference, tm
 @pytest.mark.parametrize("die_after", range(3))  # loss.csv, weights, config: no state yet
 def test_a_kill_inside_the_first_save_begins_again(reference, tmp_path, monkeypatch, die_after):
     out = tmp_path / "first"
-    writes: list[str] = []
-    first = {"on": False}
-    save, write = loop._save, loop.write_atomic
-
-    def tracked_save(out, model, opt, identity, kept, *args):
-        first["on"] = kept.step == SAVE_EVERY
-        save(out, model, opt, identity, kept, *args)
-
-    def tracked_write(path, data):
-        if first["on"] and len(writes) == die_after:
-            # what a SIGKILL inside the rename leaves: the temporary file of a dead process
-            (path.parent / f".{path.name}.999999999.tmp").write_bytes(data[:10])
-            raise Killed
-        write(path, data)
-        if first["on"]:
-            writes.append(path.name)
-
-    monkeypatch.setattr(loop, "_save", tracked_save)
-    monkeypatch.setattr(loop, "write_atomic", tracked_write)
-    monkeypatch.setattr(checkpoint, "write_atomic", tracked_write)
+    final_save_writes(monkeypatch, die_after, at=SAVE_EVERY)
     with pytest.raises(Killed):
         run(out)
     assert not (out / loop.STATE).exists() and any(out.rglob(".*.tmp"))
