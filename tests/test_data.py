@@ -206,6 +206,15 @@ def test_other_arguments_on_an_existing_dataset_are_refused(dataset, tmp_path):
     assert check_dataset(root)["episodes"] == 3  # nothing was touched
 
 
+def test_a_fingerprint_tells_other_demonstrations_apart(dataset, tmp_path):
+    root = copy(dataset, tmp_path)  # the same demonstrations elsewhere: the same fingerprint
+    assert Dataset(root).fingerprint == Dataset(dataset).fingerprint
+    meta = json.loads((root / L.RMBENCH).read_text())
+    meta["collection"]["resolution"] = "128x96"  # recorded at another resolution
+    (root / L.RMBENCH).write_text(json.dumps(meta))
+    assert Dataset(root).fingerprint != Dataset(dataset).fingerprint
+
+
 def test_a_damaged_info_json_is_named_when_resuming(dataset, tmp_path):
     root = copy(dataset, tmp_path)
     files = sorted(p.relative_to(root) for p in root.rglob("*"))

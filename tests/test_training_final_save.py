@@ -182,3 +182,23 @@ def test_a_resume_on_another_thread_count_says_so(tmp_path, caplog):
     finally:
         torch.set_num_threads(threads)
     assert f"resumed on {threads + 1} torch threads where it saved on {threads}" in caplog.text
+
+
+def test_a_resume_on_other_data_is_refused(tmp_path):
+    out = tmp_path / "d"
+
+    def on(data):
+        return train(Line(), batches, TrainConfig(steps=STEPS, save_every=SAVE_EVERY), out,
+                     {"policy": "line"}, progress=False, write_checkpoint=save_checkpoint,
+                     data=data)
+
+    on("aaaa")
+    with pytest.raises(loop.TrainingError, match=r"on other data \(fingerprint aaaa there, "
+                                                 r"bbbb asked\)"):
+        on("bbbb")
+    assert on("aaaa")["resumed_from"] == STEPS
+    # a state saved before fingerprints were kept resumes on any data
+    state = torch.load(out / loop.STATE, weights_only=True)
+    state["data"] = None
+    torch.save(state, out / loop.STATE)
+    assert on("bbbb")["resumed_from"] == STEPS

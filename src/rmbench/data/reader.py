@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from dataclasses import dataclass, field
@@ -251,6 +252,17 @@ class Dataset:
         if missing:
             raise DatasetError(f"{path}: no statistics of camera {missing[0]!r}")
         return {c: stats[L.image_key(c)] for c in self.cameras}
+
+    @cached_property
+    def fingerprint(self) -> str:
+        """What tells these demonstrations from others, in 16 hex digits: the task version,
+        the collection's arguments (cameras, resolution, noise, seed), the features' layout and
+        each episode's seed and length. The same for a dataset collected again with the same
+        arguments (no wall time enters it)."""
+        key = {"gym_id": self.gym_id, "collection": self.rmbench.get("collection"),
+               "features": self.features,
+               "episodes": [[int(r["rmbench/seed"]), int(r["length"])] for r in self.episodes]}
+        return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
     @cached_property
     def stats(self) -> dict[str, dict[str, np.ndarray]]:

@@ -248,7 +248,7 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
 
     return train(trainer, batches, train_cfg, out, describe, progress,
                  write_checkpoint=save_checkpoint, checkpoint_step=saved_step,
-                 config_defaults=type(cfg)().to_dict())
+                 config_defaults=type(cfg)().to_dict(), data=ds.fingerprint)
 
 
 class _Slot:

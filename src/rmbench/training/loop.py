@@ -166,13 +166,17 @@ CheckpointStep = Callable[[Path], "int | None"]
 def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | Path,
           describe: dict[str, Any], progress: bool = True, *,
           write_checkpoint: CheckpointWriter, checkpoint_step: CheckpointStep | None = None,
-          config_defaults: dict[str, Any] | None = None) -> dict[str, Any]:
+          config_defaults: dict[str, Any] | None = None,
+          data: str | None = None) -> dict[str, Any]:
     """Train ``model`` for ``cfg.steps`` steps into ``out``; ``describe`` is what the
     inference checkpoint's config.json holds (and what a resume must match), and
     ``write_checkpoint`` writes that checkpoint at each save; ``checkpoint_step`` reads the
     step of the one ``out`` holds, to repair it when the training is done. ``config_defaults``: the
     defaults of the policy config in ``describe["config"]``; a run saved before a field
-    existed ran with its default, so it resumes when that default is asked for."""
+    existed ran with its default, so it resumes when that default is asked for. ``data``: the
+    training data's fingerprint (``Dataset.fingerprint``), kept in the state beside the
+    identity (a dataset's folder is no part of it) so that a resume on other data is refused;
+    a state saved without one resumes on any."""
     out = Path(out)
     dist = Dist.from_env()
     if dist.world > 1 and not torch.distributed.is_initialized():
@@ -190,7 +194,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
                             betas=(0.9, 0.999), weight_decay=cfg.weight_decay, foreach=True)
     identity = run_identity(describe, cfg, dist.world)
     defaults = json.loads(json.dumps(config_defaults or {}))
-    kept = _resume(out, model, opt, identity, defaults, device)
+    kept = _resume(out, model, opt, identity, defaults, device, data)
     start = kept.step
     if dist.rank == 0:
         for folder in (out, out / STATE.parent):  # what writers killed before a rename left
@@ -246,7 +250,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
             # unrounded: a short piece's steps would otherwise count as no time at all
             kept = Kept(step + 1, before + time.perf_counter() - t0, kept.wall_from, machines)
             if lead:
-                _save(out, model, opt, identity, kept, rows, write_checkpoint)
+                _save(out, model, opt, identity, kept, rows, write_checkpoint, data)
                 rows = []
             last_save = step + 1
     bar.close()
@@ -257,13 +261,13 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
 
 
 def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict, kept: Kept,
-          rows: list[dict], write_checkpoint: CheckpointWriter) -> None:
+          rows: list[dict], write_checkpoint: CheckpointWriter, data: str | None = None) -> None:
     step = kept.step
     state = {"step": step, "identity": json.dumps(identity, sort_keys=True),
              "wall_s": kept.wall_s, "wall_from": kept.wall_from,
              "machines": json.dumps(kept.machines),
              "model": model.state_dict(), "optimizer": opt.state_dict(),
-             "rng": torch.get_rng_state(), "threads": torch.get_num_threads(),
+             "rng": torch.get_rng_state(), "threads": torch.get_num_threads(), "data": data,
              "extra": model.extra_state() if hasattr(model, "extra_state") else {}}
     if torch.cuda.is_available():
         state["cuda_rng"] = torch.cuda.get_rng_state_all()
@@ -284,7 +288,7 @@ def _export(out: Path, model: nn.Module, identity: dict, step: int,
 
 
 def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict,
-            config_defaults: dict, device: torch.device) -> Kept:
+            config_defaults: dict, device: torch.device, data: str | None = None) -> Kept:
     path = out / STATE
     if not path.exists():
         if (out / STARTED).exists():  # this folder's run stopped before its first save ended
@@ -306,6 +310,10 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
     if what:
         raise TrainingError(f"{out} holds a training run with other arguments ({what}); "
                             f"use another --out")
+    if None not in (state.get("data"), data) and state["data"] != data:
+        raise TrainingError(f"{out} holds a training run on other data (fingerprint "
+                            f"{state['data']} there, {data} asked): a dataset collected with "
+                            f"other arguments or episodes; use another --out")
     model.load_state_dict(state["model"])
     opt.load_state_dict(state["optimizer"])
     torch.set_rng_state(state["rng"].cpu())

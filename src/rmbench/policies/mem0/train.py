@@ -183,7 +183,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
 
     result = train(trainer, batches, train_cfg, out, describe, progress,
                    write_checkpoint=save_checkpoint, checkpoint_step=saved_step,
-                   config_defaults=type(cfg)().to_dict())
+                   config_defaults=type(cfg)().to_dict(), data=ds.fingerprint)
     if trainer.planner_report is not None:
         write_json(out / "training" / "planner.json", trainer.planner_report, indent=2)
     return result
