@@ -105,6 +105,17 @@ def test_check_names_a_missing_video(dataset, tmp_path):
         check_dataset(root)
 
 
+@pytest.mark.parametrize("kind", ["data", "video"])
+def test_check_names_an_interrupted_episodes_files(dataset, tmp_path, kind):
+    root = copy(dataset, tmp_path)  # a collection stopped inside episode 3's commit
+    src, dst = ((L.data_file(0), L.data_file(3)) if kind == "data" else
+                (L.video_file(L.image_key("head"), 0), L.video_file(L.image_key("head"), 3)))
+    shutil.copy(root / src, root / dst)
+    (root / dst).with_name(".x.999999999.tmp").write_bytes(b"x")  # a leftover is not named
+    with pytest.raises(DatasetError, match=r"file-003\.(parquet|mp4): beyond the 3 episodes"):
+        check_dataset(root)
+
+
 def test_check_names_a_corrupt_video(dataset, tmp_path):
     root = copy(dataset, tmp_path)
     (root / L.video_file("observation.images.head", 0)).write_bytes(b"not a video")

@@ -92,6 +92,16 @@ def _check(root) -> dict:
               + (f"missing {missing[0]}" if missing else f"{extra[0]} beyond the "
                  f"{ds.num_episodes} episodes in info.json (an interrupted collection: re-run it "
                  f"to resume)"))
+    # an episode's data and videos are written before its meta/episodes row: files of one
+    # past the committed count are an interrupted episode's (missing ones are named below)
+    committed = {L.data_file(e) for e in range(ds.num_episodes)} | {
+        L.video_file(key, e) for key in video_keys for e in range(ds.num_episodes)}
+    extra = sorted(p.relative_to(root).as_posix() for sub in ("data", "videos")
+                   for p in (root / sub).rglob("*") if p.is_file() and not p.name.startswith(".")
+                   and p.relative_to(root).as_posix() not in committed)
+    if extra:
+        _fail(f"{root / extra[0]}: beyond the {ds.num_episodes} episodes in info.json (an "
+              f"interrupted collection: re-run it to resume)")
 
     first = 0
     for e in range(ds.num_episodes):
