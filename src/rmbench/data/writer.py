@@ -123,7 +123,7 @@ class DatasetWriter:
             self._remove()
         if (self.root / L.RMBENCH).exists():
             self._resume()
-        elif self.root.exists() and any(p.is_file() for p in self.root.rglob("*")):
+        elif self.root.exists() and _holds_files(self.root):
             raise DatasetError(f"{self.root} exists, is not empty and holds no rmbench dataset "
                                f"({L.RMBENCH} is missing); choose another --out")
         self._write_dataset_meta()
@@ -282,10 +282,15 @@ class DatasetWriter:
         return removed
 
     def _remove(self) -> None:
-        if (not (self.root / L.RMBENCH).exists()
-                and any(p.is_file() for p in self.root.rglob("*"))):
+        if not (self.root / L.RMBENCH).exists() and _holds_files(self.root):
             raise DatasetError(f"refusing to delete {self.root}: it is not an rmbench dataset")
         shutil.rmtree(self.root)
+
+
+def _holds_files(root: Path) -> bool:
+    """Whether ``root`` holds any file (empty folders, such as a start stopped before its
+    first file, do not count)."""
+    return any(p.is_file() for p in root.rglob("*"))
 
 
 _FILE = re.compile(r"chunk-(\d+)[/\\]file-(\d+)\.(parquet|mp4)$")

@@ -41,7 +41,13 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from rmbench.files import remove_leftovers, write_atomic, write_json
+from rmbench.files import (
+    FileFormatError,
+    read_json_object,
+    remove_leftovers,
+    write_atomic,
+    write_json,
+)
 from rmbench.identity import differences
 from rmbench.machine import describe as describe_machine
 from rmbench.tasks.registry import recorded_gym_id
@@ -293,9 +299,9 @@ def _resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: d
     if not path.exists():
         if (out / STARTED).exists():  # this folder's run stopped before its first save ended
             try:
-                started = json.loads((out / STARTED).read_text())
-            except (OSError, json.JSONDecodeError) as err:
-                raise TrainingError(f"{out / STARTED}: unreadable ({err})") from None
+                started = read_json_object(out / STARTED)
+            except FileFormatError as err:
+                raise TrainingError(str(err)) from None
             what = run_differences(started, identity, config_defaults)
             if what:
                 raise TrainingError(f"{out} holds a training run with other arguments "
