@@ -1089,6 +1089,16 @@ def speed() -> str:
                  f"{cpu['folded']['batch1']:.1f} against {cpu['network']['batch1']:.1f} at batch 1 "
                  f"({fold['speedup']['batch1']:.2f}x); features within "
                  f"{fold['max_abs_difference']:.0e}", "`benchmarks/backbone_fold.py`"])
+    prep = load("frame_prep.json")
+    now, before = prep["cpu_ms_per_frame"]["now"], prep["cpu_ms_per_frame"]["before"]
+    rows.append([f"a recorded {prep['task']} camera ({prep['frames']} frames, {prep['source']}) "
+                 f"decoded and resized to {prep['size'][0]}x{prep['size'][1]} for the feature "
+                 "cache, 1 thread: into one array, 32 frames a resize pass, against a stacked "
+                 "list and the episode in one pass",
+                 f"{now['both']:.2f} ms of CPU a frame against {before['both']:.2f} "
+                 f"({prep['speedup']['both']:.2f}x; resize {prep['speedup']['resize']:.2f}x); "
+                 + ("the same bytes" if all(prep["identical"].values()) else "bytes differ"),
+                 "`benchmarks/frame_prep.py`"])
     return markdown(["what", "figure", "command"], rows)
 
 

@@ -121,3 +121,18 @@ def test_a_batch_follows_episodes_added_or_replaced(demos):
     assert_batch_is_items(d, [before, len(d) - 1])
     with pytest.raises(ValueError, match="same length"):
         d.replace_episodes(doubled[:1])
+
+
+def test_resize_in_chunks_gives_the_bytes_of_one_pass():
+    import torch.nn.functional as F
+
+    from rmbench.data.torch_dataset import RESIZE_CHUNK, resize
+
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 256, (2 * RESIZE_CHUNK + 5, 24, 32, 3), dtype=np.uint8)
+    x = torch.from_numpy(frames).permute(0, 3, 1, 2).float()
+    whole = F.interpolate(x, size=(9, 13), mode="bilinear", antialias=True, align_corners=False)
+    expected = whole.round().clamp(0, 255).to(torch.uint8).permute(0, 2, 3, 1).numpy()
+    got = resize(frames, (9, 13))
+    assert got.shape == (len(frames), 9, 13, 3) and got.dtype == np.uint8
+    np.testing.assert_array_equal(got, expected)

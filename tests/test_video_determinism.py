@@ -33,3 +33,14 @@ def test_videos_are_encoded_on_one_thread_without_mbtree():
         assert (opts["mbtree"], opts["threads"], opts["lookahead_threads"]) == ("0", "1", "1")
     assert DATASET_CODEC.info()["video.mbtree"] is False
 
+
+
+def test_decode_gives_every_frame_encoded():
+    from rmbench.video import decode_video
+
+    video = frames(30)
+    decoded = decode_video(encode(DATASET_CODEC, video))
+    assert decoded.shape == video.shape and decoded.dtype == np.uint8
+    # lossy, but each decoded frame is its own source frame's, in order
+    errors = np.abs(decoded.astype(int)[:, None] - video.astype(int)[None]).mean(axis=(2, 3, 4))
+    assert (errors.argmin(axis=1) == np.arange(len(video))).all()

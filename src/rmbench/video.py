@@ -124,10 +124,21 @@ def decode_video(source: str | Path | bytes) -> np.ndarray:
     with av.open(src) as container:
         stream = container.streams.video[0]
         stream.thread_type = "AUTO"
-        frames = [f.to_ndarray(format="rgb24") for f in container.decode(stream)]
-    if not frames:
+        # into one array as they decode (the header's count; a list and np.stack copy each
+        # frame twice), grown if a file holds more frames than its header says
+        frames: np.ndarray | None = None
+        n = 0
+        for f in container.decode(stream):
+            frame = f.to_ndarray(format="rgb24")
+            if frames is None:
+                frames = np.empty((max(stream.frames, 1), *frame.shape), dtype=frame.dtype)
+            elif n == len(frames):
+                frames = np.concatenate([frames, np.empty_like(frames)])
+            frames[n] = frame
+            n += 1
+    if frames is None:
         raise ValueError(f"{source if not isinstance(source, bytes) else 'video'} has no frames")
-    return np.stack(frames)
+    return frames[:n] if n < len(frames) else frames
 
 
 def probe_video(path: str | Path) -> dict:

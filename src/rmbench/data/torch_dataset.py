@@ -73,11 +73,22 @@ def save_atomic(path: Path, array: np.ndarray) -> None:
         np.save(tmp, array)
 
 
+RESIZE_CHUNK = 32  # frames a pass: an episode's frames as float32 at once are ~1 GB
+
+
 def resize(frames: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """(T, H, W, 3) uint8 -> (T, h, w, 3) uint8, antialiased bilinear."""
-    x = torch.from_numpy(np.ascontiguousarray(frames)).permute(0, 3, 1, 2).float()
-    y = F.interpolate(x, size=size, mode="bilinear", antialias=True, align_corners=False)
-    return y.round().clamp(0, 255).to(torch.uint8).permute(0, 2, 3, 1).numpy()
+    """(T, H, W, 3) uint8 -> (T, h, w, 3) uint8, antialiased bilinear.
+
+    Each frame is resized on its own, so resizing ``RESIZE_CHUNK`` frames a pass gives the
+    bytes a single pass over the episode gives, in less time: the float copy of a chunk stays
+    in cache where an episode's (800 frames at 320x240) does not."""
+    out = np.empty((len(frames), *size, 3), dtype=np.uint8)
+    for i in range(0, len(frames), RESIZE_CHUNK):
+        x = torch.from_numpy(np.ascontiguousarray(frames[i:i + RESIZE_CHUNK]))
+        y = F.interpolate(x.permute(0, 3, 1, 2).float(), size=size, mode="bilinear",
+                          antialias=True, align_corners=False)
+        out[i:i + RESIZE_CHUNK] = y.round().clamp(0, 255).to(torch.uint8).permute(0, 2, 3, 1)
+    return out
 
 
 class DemoDataset(torch.utils.data.Dataset):
