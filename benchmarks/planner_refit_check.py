@@ -21,7 +21,8 @@ import torch
 from safetensors.torch import load_file
 
 from rmbench.files import write_json
-from rmbench.training.loop import CURVE_CSV, STATE
+from rmbench.training.curve import CURVE_CSV
+from rmbench.training.state import STATE
 
 OUT = Path(__file__).resolve().parent / "results" / "planner_refit_check.json"
 

@@ -20,7 +20,8 @@ from rmbench.policies.mem0.memory import MemoryStore
 from rmbench.policies.mem0.planner import Planner, planner_examples, runs
 from rmbench.policies.mem0.train import check_executor_source, executor_digest, train_mem0
 from rmbench.policies.registry import env_options, policy_cameras
-from rmbench.training.loop import TrainConfig, TrainingError
+from rmbench.training.loop import TrainConfig
+from rmbench.training.state import TrainingError
 from tests.conftest import EXPORTED, keep_exports, roll_out
 
 TINY = Mem0Config(cameras=("head", "left_wrist"), planner_cameras=("head",), image_size=(48, 64),

@@ -12,7 +12,7 @@ from torch import nn
 from rmbench import files
 from rmbench.policies import checkpoint
 from rmbench.policies.checkpoint import save_checkpoint, saved_step
-from rmbench.training import loop
+from rmbench.training import curve, loop
 from rmbench.training.loop import TrainConfig, train
 
 STEPS, SAVE_EVERY = 6, 4  # saves at 4 and 6: a kill in the final save resumes from 4
@@ -88,6 +88,7 @@ def final_save_writes(monkeypatch, die_after: int | None, at: int = STEPS) -> li
 
     monkeypatch.setattr(loop, "_save", tracked_save)
     monkeypatch.setattr(loop, "write_atomic", tracked_write)
+    monkeypatch.setattr(curve, "write_atomic", tracked_write)  # loss.csv, loss.png
     monkeypatch.setattr(checkpoint, "write_atomic", tracked_write)
     monkeypatch.setattr(files, "write_atomic", tracked_write)  # write_json's writes
     return writes

@@ -4,7 +4,7 @@ frozen backbones' features, so that the training jobs beside each other only rea
 the cell's checkpoint, evaluate it. Wall times accumulate in each folder's ``timing.json``
 (``suite.clock``) with the machines they ran on: a data stage's minute by minute as it runs,
 an evaluation's when a call completes it (a call killed midway loses its own time, not the
-episodes it saved); a training's is the one its saved state counts (``training.loop.Kept``),
+episodes it saved); a training's is the one its saved state counts (``training.state.Kept``),
 every piece up to its last save."""
 
 from __future__ import annotations
@@ -34,7 +34,9 @@ from rmbench.suite.plan import (
 )
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
-from rmbench.training.loop import CURVE_CSV, STATE, TrainConfig
+from rmbench.training.curve import CURVE_CSV
+from rmbench.training.loop import TrainConfig
+from rmbench.training.state import STATE
 
 
 # ------------------------------------------------------------------------------ done yet?

@@ -41,15 +41,13 @@ from rmbench.policies.nn.vision import color_jitter
 from rmbench.policies.observation import choose, set_state_stats
 from rmbench.tasks import get_task
 from rmbench.training.batches import batch_stream
-from rmbench.training.loop import (
+from rmbench.training.loop import TrainConfig, lr_at, train
+from rmbench.training.state import (
     STATE,
-    TrainConfig,
     TrainingError,
-    lr_at,
     run_differences,
     run_identity,
     saved_run,
-    train,
 )
 
 log = logging.getLogger(__name__)

@@ -1,0 +1,184 @@
+"""What a training folder holds to resume: its saved state, the run it is, the time behind it.
+
+``OUT/training/state.pt`` holds weights, optimiser, RNG and extra state, written atomically;
+it is the commit point (``rmbench.training.loop`` writes it). A run is known by its identity
+(the checkpoint's description, the training settings, the number of processes) and by its
+data's fingerprint: a resume must match both, apart from where the run trains. A folder whose
+first save was interrupted holds ``training/started.json`` (the run's identity), so that it is
+begun again rather than refused.
+
+The state also counts the wall time of the steps it holds, over every piece that saved them
+and the machines they ran on: a training spread over several runs (each killed, then
+resumed) keeps the time of all its saved steps, and loses with a killed piece only the time
+of the steps it had not saved, which it loses too.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from rmbench.files import FileFormatError, read_json_object
+from rmbench.identity import differences
+from rmbench.tasks.registry import recorded_gym_id
+
+log = logging.getLogger(__name__)
+
+STATE = Path("training") / "state.pt"
+# the run's identity, written before anything else of a new run: a folder whose first save
+# was interrupted (a checkpoint, no state yet) is then known as this run's and begun again
+STARTED = Path("training") / "started.json"
+
+
+class TrainingError(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class Kept:
+    """What a saved state holds of the work behind it: its step, the wall time of the steps
+    from ``wall_from`` (0, or the step a state saved before wall times were kept resumed at),
+    and the machines that trained them."""
+
+    step: int = 0
+    wall_s: float = 0.0
+    wall_from: int = 0
+    machines: tuple[dict, ...] = ()
+
+    def timing(self) -> dict[str, Any]:
+        return {"train_wall_s": self.wall_s, "train_wall_from_step": self.wall_from,
+                "machines": [dict(m) for m in self.machines]}
+
+
+# Where a run trains is not part of what it is: a run started on a GPU resumes on a CPU (or
+# another GPU), and one started on another machine resumes on this one, where the same dataset lives
+# in another folder; it draws the batches it would have drawn. The dataset's episodes and
+# frames stay part of it.
+PLACE_FIELDS = ("device",)
+
+
+def _run_fields(cfg: Any) -> dict[str, Any]:
+    """The settings a resumed run must share with the saved one."""
+    return {k: v for k, v in asdict(cfg).items() if k not in PLACE_FIELDS}
+
+
+def run_identity(describe: dict[str, Any], cfg: Any, world: int = 1) -> dict:
+    """What a run is, as its saved state records it and a resume must match: the checkpoint's
+    description, the training settings and the number of processes; as JSON stores it
+    (tuples become lists), so that a resume compares like with like."""
+    return json.loads(json.dumps({"describe": describe, "train": _run_fields(cfg),
+                                  "world": world}))
+
+
+def _placeless(identity: dict) -> dict:
+    """``identity`` without where the run trained: its device (named by states saved before it
+    was left out) and its dataset's folder (kept in the checkpoint's description)."""
+    out = json.loads(json.dumps(identity))
+    for field in PLACE_FIELDS:
+        out.get("train", {}).pop(field, None)
+    dataset = out.get("describe", {}).get("dataset")
+    if isinstance(dataset, dict):
+        dataset.pop("path", None)
+    return out
+
+
+def state_bytes(model: nn.Module, opt: torch.optim.Optimizer, identity: dict, kept: Kept,
+                data: str | None = None) -> bytes:
+    """The training state of ``kept.step`` as ``STATE`` stores it."""
+    state = {"step": kept.step, "identity": json.dumps(identity, sort_keys=True),
+             "wall_s": kept.wall_s, "wall_from": kept.wall_from,
+             "machines": json.dumps(kept.machines),
+             "model": model.state_dict(), "optimizer": opt.state_dict(),
+             "rng": torch.get_rng_state(), "threads": torch.get_num_threads(), "data": data,
+             "extra": model.extra_state() if hasattr(model, "extra_state") else {}}
+    if torch.cuda.is_available():
+        state["cuda_rng"] = torch.cuda.get_rng_state_all()
+    buf = io.BytesIO()
+    torch.save(state, buf)
+    return buf.getvalue()
+
+
+def resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict,
+            config_defaults: dict, device: torch.device, data: str | None = None) -> Kept:
+    path = out / STATE
+    if not path.exists():
+        if (out / STARTED).exists():  # this folder's run stopped before its first save ended
+            try:
+                started = read_json_object(out / STARTED)
+            except FileFormatError as err:
+                raise TrainingError(str(err)) from None
+            what = run_differences(started, identity, config_defaults)
+            if what:
+                raise TrainingError(f"{out} holds a training run with other arguments "
+                                    f"({what}); use another --out")
+            log.warning("%s: its run stopped before its first save; begun again", out)
+            return Kept()
+        if (out / "config.json").exists() or (out.exists() and any(out.iterdir())):
+            raise TrainingError(f"{out} exists and holds no training state; use another --out")
+        return Kept()
+    state = read_state(out, device)
+    what = run_differences(json.loads(state["identity"]), identity, config_defaults)
+    if what:
+        raise TrainingError(f"{out} holds a training run with other arguments ({what}); "
+                            f"use another --out")
+    if None not in (state.get("data"), data) and state["data"] != data:
+        raise TrainingError(f"{out} holds a training run on other data (fingerprint "
+                            f"{state['data']} there, {data} asked): a dataset collected with "
+                            f"other arguments or episodes; use another --out")
+    model.load_state_dict(state["model"])
+    opt.load_state_dict(state["optimizer"])
+    torch.set_rng_state(state["rng"].cpu())
+    if "cuda_rng" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
+    if hasattr(model, "load_extra_state"):
+        model.load_extra_state(state["extra"])
+    log.info("%s: resuming at step %d", out, state["step"])
+    if state.get("threads", torch.get_num_threads()) != torch.get_num_threads():
+        log.warning("%s: resumed on %d torch threads where it saved on %d: sums in another order "
+                    "round differently, so its weights will differ in their last bits from an "
+                    "uninterrupted run's", out, torch.get_num_threads(), state["threads"])
+    step = int(state["step"])
+    if "wall_s" not in state:  # saved before wall times were kept: they count from here
+        return Kept(step, 0.0, step)
+    return Kept(step, float(state["wall_s"]), int(state["wall_from"]),
+                tuple(json.loads(state["machines"])))
+
+
+def read_state(out: Path, device: torch.device | str = "cpu") -> dict:
+    path = Path(out) / STATE
+    try:
+        return torch.load(path, map_location=device, weights_only=True)
+    except FileNotFoundError:
+        raise TrainingError(f"{out}: no training state ({STATE})") from None
+    except Exception as err:
+        raise TrainingError(f"{path}: unreadable training state ({type(err).__name__}: "
+                            f"{str(err).splitlines()[0] if str(err) else ''})") from None
+
+
+def saved_run(out: str | Path) -> tuple[dict, int]:
+    """The identity (``describe``, training settings, world size) and step of the training
+    run saved in ``out``; a TrainingError where it holds none."""
+    state = read_state(Path(out))
+    return json.loads(state["identity"]), int(state["step"])
+
+
+def run_differences(saved: dict, identity: dict, config_defaults: dict | None = None) -> str:
+    """What a saved run's identity and ``identity`` differ in, aside from where each trained
+    ('' when nothing): a config field saved before it existed reads as its default
+    (``config_defaults``), a run saved before checkpoints recorded their task version as the
+    version of that time."""
+    saved = json.loads(json.dumps(saved))
+    defaults = json.loads(json.dumps(config_defaults or {}))
+    if isinstance(saved.get("describe", {}).get("config"), dict):
+        saved["describe"]["config"] = {**defaults, **saved["describe"]["config"]}
+        if "gym_id" in identity.get("describe", {}) and "task" in saved["describe"]:
+            saved["describe"]["gym_id"] = recorded_gym_id(saved["describe"]["task"],
+                                                           saved["describe"])
+    return differences(_placeless(saved), _placeless(identity))
