@@ -645,3 +645,63 @@ def test_folders_of_another_task_version_are_moved_aside(tmp_path):
                for a, b in moved)
     assert (fresh / "config.json").exists()  # the current version's stays
     assert stages.retire_other_versions(plan, tmp_path, task) == []  # nothing left to move
+
+
+def test_a_table_refuses_another_tables_demonstrations(toy_table, tmp_path, capsys):
+    """A table's folders are named by its training recipe: asking other data of the same OUT
+    (fewer demonstrations, another noise) is refused before anything runs or is reported."""
+    import shutil
+
+    out = tmp_path / "table"
+    shutil.copytree(toy_table[0] / "observe_and_pickup" / "data", out / "observe_and_pickup" / "data")
+    base = ["table", "--obs", "state", "--tasks", "observe_and_pickup", "--policies", "dp",
+            "--steps", "6", "--batch", "4", "--episodes", "1", "--out", str(out), "--no-recipe"]
+    for more, what in ((["--demos", "1"], "2 demonstrations there, 1 asked"),
+                       (["--demos", "2", "--noise", "0.02"], "action_noise None there"),
+                       (["--demos", "2", "--noise", "0.02", "--report-only"], "action_noise")):
+        assert cli(base + more) == 2
+        err = capsys.readouterr().err
+        assert "holds demonstrations of another table" in err and what in err, err
+        assert len(err.strip().splitlines()) == 1
+    assert not (out / "observe_and_pickup" / "train").exists()
+    assert not (out / "table.json").exists()
+
+
+def test_one_table_at_a_time_in_an_out(tmp_path):
+    plan = Plan("state", ("put_back_block",), ("dp",))
+    with runner._holding(tmp_path / runner.LOCK):  # another table's hold
+        with pytest.raises(RuntimeError, match=r"in use by another rmbench table \(process \d+\)"):
+            runner.run(plan, tmp_path)
+    assert not (tmp_path / "put_back_block").exists()
+
+
+def test_a_failed_job_reports_the_last_line_of_its_own_run(tmp_path, monkeypatch):
+    """A job's log keeps its earlier runs; a run that dies without a word is not reported
+    with an earlier run's last line."""
+    import subprocess
+    import sys
+    import time
+
+    log = tmp_path / "job.log"
+    log.write_text("RuntimeError: the error of an earlier run\n")
+    popen = subprocess.Popen
+    monkeypatch.setattr(runner.subprocess, "Popen", lambda cmd, **kw: popen(
+        [sys.executable, "-c", "raise SystemExit(9)"], **kw))
+    pool = runner.LocalJobs(1)
+    job = runner.Job("collect", "put_back_block")
+    pool.start(Plan("state", ("put_back_block",), ("dp",)), tmp_path, job, log)
+    deadline = time.monotonic() + 30
+    while not (ended := pool.finished()):
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert ended == [(job, "exit 9: no output")]
+
+
+def test_a_damaged_clock_is_an_error_not_a_fresh_start(tmp_path):
+    from rmbench.files import FileFormatError
+
+    clock.add_time(tmp_path, "collect_wall_s", 5.0)
+    (tmp_path / clock.TIMING).write_text('{"collect_wall_s": 5.0, "mach')
+    with pytest.raises(FileFormatError, match="timing.json"):
+        clock.add_time(tmp_path, "collect_wall_s", 1.0)
+    assert (tmp_path / clock.TIMING).read_text() == '{"collect_wall_s": 5.0, "mach'

@@ -93,7 +93,7 @@ def cmd_table(args) -> int:
     import shlex
     from pathlib import Path
 
-    from rmbench.suite import runner, tables
+    from rmbench.suite import runner, stages, tables
     from rmbench.suite.plan import ALL_POLICIES, Plan, with_seed
     from rmbench.suite.recipes import RECIPES, recipe_of
     from rmbench.tasks.registry import ordered
@@ -114,6 +114,7 @@ def cmd_table(args) -> int:
         # is reported whole from what its folder holds
         if not out.is_dir():
             raise ValueError(f"no table at {out} (--report-only runs nothing)")
+        stages.check_data(plan, out)
         failed = {}
     else:
         failed = runner.run(plan, out, jobs=args.jobs, backend=args.backend)
@@ -258,7 +259,10 @@ def add_parsers(sub) -> None:
     p.add_argument("--device", default="cpu",
                    help="where the cells train: cpu | cuda | cuda:N (a run started on a GPU "
                         "resumes on a CPU; collection and evaluation stay on the CPU)")
-    p.add_argument("--out", default=None, help="the table's folder (default runs/table_<obs>)")
+    p.add_argument("--out", default=None,
+                   help="the table's folder (default runs/table_<obs>), resumed if it exists; "
+                        "one table runs in it at a time, and the demonstrations it holds must "
+                        "be this table's (other --demos, --noise or --obs: another --out)")
     p.add_argument("--jobs", type=int, default=1,
                    help="jobs at once (local: each a process with (usable cores) / --jobs "
                         "torch threads, usable being this process's affinity; on a shared "

@@ -9,7 +9,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from rmbench.files import write_json
+from rmbench.files import read_json_object, write_json
 from rmbench.machine import describe
 
 TIMING = "timing.json"
@@ -57,7 +57,8 @@ def add_time(folder: Path, key: str, seconds: float) -> None:
     """Accumulate a stage's wall time in ``folder/timing.json``, and the machine it ran on in
     ``machines`` (each machine that added time once)."""
     path = Path(folder) / TIMING
-    timing = read_json(path, {})
+    # a damaged record is an error, not a fresh start: the times it held would be lost
+    timing = read_json_object(path) if path.exists() else {}
     timing[key] = timing.get(key, 0.0) + seconds  # unrounded: short stages add up
     machines = timing.setdefault("machines", [])
     here = describe()

@@ -8,12 +8,14 @@ threads (a collect or evaluation job: as many worker processes) and its own log 
 ``OUT/logs``; on Ray each is a task with one CPU, and ``OUT`` must be a file system every
 node sees (the stages read and write their folders there). A
 job that fails is reported with its log and its dependants are skipped; the others go on.
-Interrupted (Ctrl-C, a killed terminal), the running jobs stop and what they saved stays:
-a re-run of the same command plans only what is missing.
+Interrupted (Ctrl-C, SIGTERM, a closed terminal), the running jobs stop and what they saved
+stays: a re-run of the same command plans only what is missing. One table runs in an ``OUT`` at
+a time (``OUT/.table.lock``): two would write one dataset or one training at once.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import signal
@@ -21,9 +23,10 @@ import subprocess
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import IO, TextIO
 
 from rmbench.machine import usable_cores
 from rmbench.suite import clock, stages
@@ -32,6 +35,8 @@ from rmbench.suite.plan import Plan, executor_spec, trained_spec
 
 BACKENDS = ("local", "ray")
 PRIORITY = {"collect": 0, "eval": 1, "train": 2}  # within a task: unblock others, results early
+LOCK = ".table.lock"
+STOPS = (signal.SIGTERM, signal.SIGHUP)  # stop the table as Ctrl-C does
 
 
 def start_order(needs: dict[Job, tuple[Job, ...]]) -> list[Job]:
@@ -99,14 +104,15 @@ class LocalJobs:
                "--parent", str(os.getpid())]
         env = {**os.environ, **{v: str(self.threads) for v in
                                 ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}}
-        f = open(log, "a")
-        self.running[job] = (subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env), f)
+        f = open(log, "a")  # (appended: a resumed job's log keeps its earlier runs)
+        self.running[job] = (subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env), f,
+                             f.tell())
 
     def finished(self) -> list[tuple[Job, str | None]]:
         """Jobs that ended since the last call, each with None or its error in one line (the
-        log's last line: the job's one-line error, or a traceback's last line)."""
+        last line this run of the job wrote: its one-line error, or a traceback's last line)."""
         done = []
-        for job, (proc, f) in list(self.running.items()):
+        for job, (proc, f, start) in list(self.running.items()):
             if proc.poll() is None:
                 continue
             f.close()
@@ -114,12 +120,14 @@ class LocalJobs:
             if proc.returncode == 0:
                 done.append((job, None))
                 continue
-            lines = Path(f.name).read_text(errors="replace").strip().splitlines()
+            with open(f.name, "rb") as log:
+                log.seek(start)
+                lines = log.read().decode(errors="replace").strip().splitlines()
             done.append((job, f"exit {proc.returncode}: {lines[-1] if lines else 'no output'}"))
         return done
 
     def stop(self) -> None:
-        for proc, f in self.running.values():
+        for proc, f, _ in self.running.values():
             proc.terminate()
             proc.wait()
             f.close()
@@ -141,7 +149,8 @@ class RayJobs:
         self.running: dict[Job, object] = {}
 
     def start(self, plan: Plan, out: Path, job: Job, log: Path) -> None:
-        self.running[job] = self.remote.remote(plan.to_dict(), str(out), job.kind, job.task,
+        # resolved: a worker on another node starts in another directory
+        self.running[job] = self.remote.remote(plan.to_dict(), str(out.resolve()), job.kind, job.task,
                                                job.spec, 1, source_digest(), str(log))
 
     def finished(self) -> list[tuple[Job, str | None]]:
@@ -251,9 +260,15 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
     if jobs < 1:
         raise ValueError("jobs must be >= 1")
     out = Path(out)
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    with _holding(out / LOCK):
+        return _run(plan, out, jobs, backend, progress or Progress(plan, out), poll_s)
+
+
+def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
+         poll_s: float) -> dict[Job, str]:
+    stages.check_data(plan, out)
     logs = out / "logs"
-    logs.mkdir(parents=True, exist_ok=True)
-    progress = progress or Progress(plan, out)
     for task in dict.fromkeys(t for t, _ in plan.cells()):
         for old, new in stages.retire_other_versions(plan, out, task):
             progress.show(set(), {}, f"{old} was made on another version of {task}: "
@@ -264,37 +279,74 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
     pending = start_order(needs)
     done: set[Job] = set()
     failed: dict[Job, str] = {}
-    t0 = time.perf_counter()
     main = threading.current_thread() is threading.main_thread()
-    # terminated: stop the jobs as Ctrl-C does (signal handlers belong to the main thread)
-    on_term = signal.signal(signal.SIGTERM, _interrupt) if main else None
+    # terminated or hung up: stop the jobs as Ctrl-C does (handlers belong to the main thread)
+    handlers = {sig: signal.signal(sig, _interrupt) for sig in STOPS} if main else {}
     try:
-        progress.show(set(pool.running), failed, f"{len(needs)} jobs to run")
-        while pending or pool.running:
-            for job in list(pending):
-                if any(d in failed for d in needs[job]):  # its input failed: skipped
-                    pending.remove(job)
-                    failed[job] = f"skipped: {' and '.join(d.name for d in needs[job] if d in failed)} failed"
-                elif len(pool.running) < jobs and all(d in done for d in needs[job]):
-                    pending.remove(job)
-                    pool.start(plan, out, job, logs / job.log_name)
-                    progress.show(set(pool.running), failed, f"started {job.name}")
-            for job, error in pool.finished():
-                if error is None:
-                    done.add(job)
-                else:
-                    failed[job] = f"{error} (log {logs / job.log_name})"
-                progress.show(set(pool.running), failed,
-                              f"{'done' if error is None else 'FAILED'} {job.name}")
-            if pending or pool.running:
-                time.sleep(poll_s)
-                progress.show(set(pool.running), failed)
+        # counted every minute as it runs: a table killed outright keeps its time but a minute
+        with clock.timed(out, "table_wall_s"):
+            try:
+                progress.show(set(pool.running), failed, f"{len(needs)} jobs to run")
+                while pending or pool.running:
+                    for job in list(pending):
+                        if any(d in failed for d in needs[job]):  # its input failed: skipped
+                            pending.remove(job)
+                            failed[job] = ("skipped: " + " and ".join(
+                                d.name for d in needs[job] if d in failed) + " failed")
+                        elif len(pool.running) < jobs and all(d in done for d in needs[job]):
+                            pending.remove(job)
+                            pool.start(plan, out, job, logs / job.log_name)
+                            progress.show(set(pool.running), failed, f"started {job.name}")
+                    for job, error in pool.finished():
+                        if error is None:
+                            done.add(job)
+                        else:
+                            failed[job] = f"{error} (log {logs / job.log_name})"
+                        progress.show(set(pool.running), failed,
+                                      f"{'done' if error is None else 'FAILED'} {job.name}")
+                    if pending or pool.running:
+                        time.sleep(poll_s)
+                        progress.show(set(pool.running), failed)
+            finally:
+                _stop(pool, main)
     finally:
-        pool.stop()
-        if main:
-            signal.signal(signal.SIGTERM, on_term)
-        clock.add_time(out, "table_wall_s", time.perf_counter() - t0)
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
     return failed
+
+
+def _stop(pool, main: bool) -> None:
+    """The running jobs stopped; a second Ctrl-C or SIGTERM meanwhile does not cut it short
+    (it would leave jobs running and the table's clock unwritten)."""
+    held = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, *STOPS)} if main else {}
+    try:
+        pool.stop()
+    finally:
+        for sig, handler in held.items():
+            signal.signal(sig, handler)
+
+
+@contextmanager
+def _holding(path: Path):
+    """An exclusive lock on ``path`` (released when the process ends, however it ends), or a
+    one-line error naming the process that holds it."""
+    f: IO[str] = open(path, "a+")
+    try:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            pid = f.read().strip()
+            raise RuntimeError(f"{path.parent} is in use by another rmbench table"
+                               f"{f' (process {pid})' if pid else ''}: wait for it to end, "
+                               f"or use another --out") from None
+        f.seek(0)
+        f.truncate()
+        f.write(f"{os.getpid()}\n")
+        f.flush()
+        yield
+    finally:
+        f.close()
 
 
 def _interrupt(signum, frame):

@@ -22,6 +22,7 @@ from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
 from rmbench.files import write_json
+from rmbench.identity import differences
 from rmbench.suite.clock import DATA_WALLS, TIMING, add_time, read_json, timed
 from rmbench.suite.plan import (
     COLLECT_CAMERAS,
@@ -40,6 +41,36 @@ from rmbench.training.state import STATE
 
 
 # ------------------------------------------------------------------------------ done yet?
+def collect_config(plan: Plan, out: Path, task: str, workers: int = 1,
+                   progress: bool = False) -> CollectConfig:
+    """The collection of ``task``'s demonstrations the plan asks for."""
+    cameras, (width, height) = COLLECT_CAMERAS[plan.obs]
+    return CollectConfig(task, plan.data_dir(out, task), episodes=plan.demos, seed=0,
+                         cameras=cameras, width=width, height=height, workers=workers,
+                         noise=NoiseSpec(plan.noise_kind, plan.noise), progress=progress)
+
+
+def check_data(plan: Plan, out: Path) -> None:
+    """Each task's demonstrations already in ``out`` are the plan's: collected with its
+    cameras, resolution and action noise, and no more of them than it asks, since its
+    policies train on every episode the folder holds. A table's folders are named by its
+    training recipe alone, so a table asking other data of the same ``OUT`` would otherwise
+    train on, or report, the other table's. ValueError in one line where they are not."""
+    for task in plan.tasks:
+        root = plan.data_dir(out, task)
+        if not (root / "meta" / "info.json").exists():
+            continue
+        ds = Dataset(root)
+        what = differences(ds.rmbench.get("collection") or {},
+                           collect_config(plan, out, task).identity())
+        if ds.num_episodes > plan.demos:
+            what = ", ".join(x for x in (what, f"{ds.num_episodes} demonstrations there, "
+                                               f"{plan.demos} asked") if x)
+        if what:
+            raise ValueError(f"{root} holds demonstrations of another table ({what}); "
+                             f"use another --out")
+
+
 def demos_collected(plan: Plan, out: Path, task: str) -> bool:
     root = plan.data_dir(out, task)
     return (root / "meta" / "info.json").exists() and Dataset(root).num_episodes >= plan.demos
@@ -197,14 +228,10 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
     demonstrations, their rendered copies, the frozen backbones' features; their summary."""
     from rmbench.data.layout_copies import copy_layouts
 
-    cameras, (width, height) = COLLECT_CAMERAS[plan.obs]
     root = plan.data_dir(out, task)
     if not demos_collected(plan, out, task):
         with timed(root.parent, "collect_wall_s"):
-            collect(CollectConfig(task, root, episodes=plan.demos, seed=0, cameras=cameras,
-                                  width=width, height=height, workers=workers,
-                                  noise=NoiseSpec(plan.noise_kind, plan.noise),
-                                  progress=progress))
+            collect(collect_config(plan, out, task, workers, progress))
     if plan.rendered_copies and copies_done(plan, out, task) is None:
         with timed(root.parent, "copies_wall_s"):
             summary = copy_layouts(root, plan.train_data_dir(out, task), plan.rendered_copies,
@@ -222,6 +249,7 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
             with timed(root.parent, "layout_copies_wall_s"):
                 solve_layout_copies(data, n, reach, COPIES_SEED, workers)
     ds, timing = Dataset(root), read_json(root.parent / TIMING, {})
+    width, height = COLLECT_CAMERAS[plan.obs][1]
     return {"path": str(root), "episodes": ds.num_episodes, "frames": ds.num_frames,
             "cameras": list(ds.cameras), "resolution": f"{width}x{height}",
             "environment_state": ds.state_names is not None,
