@@ -325,3 +325,24 @@ def test_a_bad_policy_is_refused_before_anything_is_written(tmp_path):
     (tmp_path / "out" / "run.json").write_text("[1, 2]")
     with pytest.raises(ValueError, match=r"run.json: holds a JSON list, not an object"):
         evaluate(cfg(tmp_path, policy="noop", episodes=1))
+
+
+def test_a_checkpoint_spelled_another_way_resumes_its_evaluation(tmp_path, monkeypatch):
+    """A table re-run with its OUT given as an absolute path, or through a link, names the
+    same checkpoint folder in other words: its evaluations resume, they are not refused."""
+    from rmbench.eval.harness import _check_identity, _placed
+
+    ckpt = tmp_path / "runs" / "ckpt"
+    ckpt.mkdir(parents=True)
+    (tmp_path / "link").symlink_to(tmp_path / "runs")
+    monkeypatch.chdir(tmp_path)
+    assert _placed("mem0:runs/ckpt?ablation=no_key") == f"mem0:{ckpt}?ablation=no_key"
+    assert _placed("mem0:link/ckpt") == _placed(f"mem0:{ckpt}") == f"mem0:{ckpt}"
+    assert _placed("noop") == "noop" and _placed("mem0:no/such/folder") == "mem0:no/such/folder"
+    out = tmp_path / "eval"
+    _check_identity(out, cfg(out, policy="mem0:runs/ckpt"))
+    (out / TASK).mkdir(parents=True)
+    (out / TASK / "episodes.jsonl").write_text('{"seed": 1}\n')  # an episode recorded
+    _check_identity(out, cfg(out, policy=f"mem0:{tmp_path}/link/ckpt"))
+    with pytest.raises(EvalError, match="other arguments"):
+        _check_identity(out, cfg(out, policy="mem0:runs/ckpt?ablation=no_key"))

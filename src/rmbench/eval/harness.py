@@ -184,13 +184,28 @@ def _check_identity(out: Path, cfg: EvalConfig) -> None:
     when none is (a run that stopped before its first episode, on a bad checkpoint say)."""
     path = out / "run.json"
     if path.exists():
-        what = differences(read_json_object(path), cfg.identity())
+        saved, asked = read_json_object(path), cfg.identity()
+        what = differences({**saved, "policy": _placed(saved.get("policy"))},
+                           {**asked, "policy": _placed(asked["policy"])})
         if not what:
             return
         if any(p.stat().st_size for p in out.glob("*/*.jsonl")):
             raise EvalError(f"{out} holds an evaluation with other arguments ({what}); use "
                             f"another --out")
     write_json(path, cfg.identity(), indent=2)
+
+
+def _placed(policy: Any) -> Any:
+    """A policy spec with the checkpoint folder it names resolved (``NAME:FOLDER[?QUERY]``,
+    where the folder exists): one checkpoint spelled from here as a relative path, an
+    absolute one or through a link is one policy, so that its evaluation resumes."""
+    if not isinstance(policy, str):
+        return policy
+    name, colon, arg = policy.partition(":")
+    folder, mark, query = arg.partition("?")
+    if not (colon and folder) or not Path(folder).is_dir():
+        return policy
+    return f"{name}:{Path(folder).resolve()}{mark}{query}"
 
 
 def _check_inputs(cfg: EvalConfig) -> None:
