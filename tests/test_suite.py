@@ -639,6 +639,13 @@ def test_folders_of_another_task_version_are_moved_aside(tmp_path):
     evals = plan.eval_dir(tmp_path, task, "mem0") / task
     evals.mkdir(parents=True)
     (evals / "version.json").write_text(json.dumps({"gym_id": old}))
+    summary = {"tasks": {task: {"episodes": 2, "success_rate": 0.5}}}
+    (evals.parent / "summary.json").write_text(json.dumps(summary))
+    # a report (which moves nothing) does not take the old version's cell for this one's
+    assert stages.evaluated(plan, tmp_path, task, "mem0") is None
+    (evals / "version.json").write_text(json.dumps({"gym_id": get_task(task).gym_id}))
+    assert stages.evaluated(plan, tmp_path, task, "mem0") == summary["tasks"][task]
+    (evals / "version.json").write_text(json.dumps({"gym_id": old}))
     moved = stages.retire_other_versions(plan, tmp_path, task)
     assert {a.name for a, _ in moved} == {"data", "timing.json", stale.name, evals.parent.name}
     assert all(b.name == f"{a.name}~SwapBlocks-v0" and b.exists() and not a.exists()

@@ -9,7 +9,6 @@ every piece up to its last save."""
 
 from __future__ import annotations
 
-import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -23,7 +22,7 @@ from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
 from rmbench.files import write_json
 from rmbench.identity import differences
-from rmbench.suite.clock import DATA_WALLS, TIMING, add_time, read_json, timed
+from rmbench.suite.clock import DATA_WALLS, TIMING, read_json, timed
 from rmbench.suite.plan import (
     COLLECT_CAMERAS,
     Plan,
@@ -143,10 +142,14 @@ def trained(plan: Plan, out: Path, task: str, spec: str) -> bool:
 
 
 def evaluated(plan: Plan, out: Path, task: str, spec: str) -> dict | None:
-    """The cell's evaluation result (the harness's per-task summary) once complete, else None."""
-    summary = read_json(plan.eval_dir(out, task, spec) / "summary.json", {})
-    result = summary.get("tasks", {}).get(task)
-    return result if result is not None and result["episodes"] >= plan.episodes else None
+    """The cell's evaluation result (the harness's per-task summary) once complete, on the
+    task's current version, else None: a report (``--report-only`` moves nothing aside) never
+    shows a cell of an earlier version as this version's."""
+    folder = plan.eval_dir(out, task, spec)
+    result = read_json(folder / "summary.json", {}).get("tasks", {}).get(task)
+    if result is None or result["episodes"] < plan.episodes:
+        return None
+    return result if made_on(folder, task) in (None, get_task(task).gym_id) else None
 
 
 def fraction(plan: Plan, out: Path, kind: str, task: str, spec: str = "") -> float:
@@ -295,11 +298,11 @@ def eval_stage(plan: Plan, out: Path, task: str, spec: str, workers: int = 1,
     result = evaluated(plan, out, task, spec)
     if result is None:
         folder = plan.eval_dir(out, task, spec)
-        t0 = time.perf_counter()
-        summary = evaluate(EvalConfig((task,), plan.eval_policy(out, task, spec), folder,
-                                      episodes=plan.episodes, workers=workers, video=plan.video,
-                                      progress=progress, split=plan.split))
-        add_time(folder, "eval_wall_s", time.perf_counter() - t0)
+        # counted as it runs: an evaluation killed and resumed keeps the time of every piece
+        with timed(folder, "eval_wall_s"):
+            summary = evaluate(EvalConfig((task,), plan.eval_policy(out, task, spec), folder,
+                                          episodes=plan.episodes, workers=workers,
+                                          video=plan.video, progress=progress, split=plan.split))
         result = summary["tasks"][task]
     return result
 
