@@ -236,7 +236,7 @@ def test_a_stage_s_clock_is_kept_while_it_runs(tmp_path):
 
     with timed(tmp_path, "copies_wall_s", every=0.01):
         deadline = time.monotonic() + 5
-        while read_json(tmp_path / TIMING, {}).get("copies_wall_s") is None:
+        while not read_json(tmp_path / TIMING, {}).get("copies_wall_s"):  # (0.0 at the start)
             assert time.monotonic() < deadline, "nothing written while the stage ran"
             time.sleep(0.01)
     first = read_json(tmp_path / TIMING, {})["copies_wall_s"]
@@ -674,12 +674,16 @@ def test_a_table_refuses_another_tables_demonstrations(toy_table, tmp_path, caps
     assert not (out / "table.json").exists()
 
 
-def test_one_table_at_a_time_in_an_out(tmp_path):
-    plan = Plan("state", ("put_back_block",), ("dp",))
-    with runner._holding(tmp_path / runner.LOCK):  # another table's hold
-        with pytest.raises(RuntimeError, match=r"in use by another rmbench table \(process \d+\)"):
+def test_one_table_at_a_time_runs_a_task_in_an_out(tmp_path):
+    plan = Plan("state", ("put_back_block", "swap_T"), ("dp",))
+    with runner._holding(tmp_path / "swap_T" / runner.LOCK):  # another table's, on swap_T
+        with pytest.raises(RuntimeError, match=r"swap_T is in use by another rmbench table "
+                                               r"\(process \d+\)"):
             runner.run(plan, tmp_path)
-    assert not (tmp_path / "put_back_block").exists()
+        assert not (tmp_path / "put_back_block" / "data").exists()
+        assert (tmp_path / "put_back_block" / runner.LOCK).exists()  # taken, then let go:
+        with runner._holding(tmp_path / "put_back_block" / runner.LOCK):  # another task is free
+            pass
 
 
 def test_a_failed_job_reports_the_last_line_of_its_own_run(tmp_path, monkeypatch):
@@ -712,3 +716,43 @@ def test_a_damaged_clock_is_an_error_not_a_fresh_start(tmp_path):
     with pytest.raises(FileFormatError, match="timing.json"):
         clock.add_time(tmp_path, "collect_wall_s", 1.0)
     assert (tmp_path / clock.TIMING).read_text() == '{"collect_wall_s": 5.0, "mach'
+
+
+def test_a_dataset_of_another_task_version_is_moved_aside_not_refused(toy_table, tmp_path):
+    """check_data reads only the current version's datasets: an older one is the runner's to
+    move aside (and a report's to leave out), not an error."""
+    import shutil
+
+    out = tmp_path / "table"
+    data = out / "observe_and_pickup" / "data"
+    shutil.copytree(toy_table[0] / "observe_and_pickup" / "data", data)
+    meta = data / "meta" / "rmbench.json"
+    record = json.loads(meta.read_text())
+    meta.write_text(json.dumps({**record, "gym_id": "rmbench/ObserveAndPickup-v0"}))
+    plan = Plan("state", ("observe_and_pickup",), ("dp",), demos=1)  # asks other data, too
+    stages.check_data(plan, out)  # not this version's: not read
+    moved = stages.retire_other_versions(plan, out, "observe_and_pickup")
+    assert [a for a, _ in moved] == [data]
+
+
+def test_a_table_under_nohup_keeps_sighup_ignored(tmp_path, monkeypatch):
+    import signal
+
+    plan = Plan("state", ("put_back_block",), ("dp",))
+    monkeypatch.setattr(runner, "plan_jobs", lambda plan, out: {})
+    seen = {}
+    real = runner.clock.timed
+
+    def timed(folder, key, every=60.0):
+        seen["hup"] = signal.getsignal(signal.SIGHUP)
+        seen["term"] = signal.getsignal(signal.SIGTERM)
+        return real(folder, key, every)
+
+    monkeypatch.setattr(runner.clock, "timed", timed)
+    before = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        assert runner.run(plan, tmp_path) == {}
+        assert seen == {"hup": signal.SIG_IGN, "term": runner._interrupt}
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN  # as it was
+    finally:
+        signal.signal(signal.SIGHUP, before)

@@ -30,6 +30,7 @@ def timed(folder: Path, key: str, every: float = 60.0):
     """Count the block's wall time into ``folder/timing.json``'s ``key`` (``add_time``) as it
     runs, every ``every`` seconds and at its end, so that a stage killed after hours (a
     session's end, Ctrl-C) keeps its time up to the last minute and its resumption adds on."""
+    add_time(folder, key, 0.0)  # a damaged record is an error now, not after the stage's hours
     stop, lock = threading.Event(), threading.Lock()
     last = [time.perf_counter()]
 

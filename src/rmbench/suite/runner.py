@@ -9,12 +9,13 @@ threads (a collect or evaluation job: as many worker processes) and its own log 
 node sees (the stages read and write their folders there). A
 job that fails is reported with its log and its dependants are skipped; the others go on.
 Interrupted (Ctrl-C, SIGTERM, a closed terminal), the running jobs stop and what they saved
-stays: a re-run of the same command plans only what is missing. One table runs in an ``OUT`` at
-a time (``OUT/.table.lock``): two would write one dataset or one training at once.
+stays: a re-run of the same command plans only what is missing. One table at a time runs a task in an
+``OUT`` (``OUT/<task>/.table.lock``): two would write one dataset or one training at once.
 """
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import os
@@ -23,7 +24,6 @@ import subprocess
 import sys
 import threading
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, TextIO
@@ -105,8 +105,9 @@ class LocalJobs:
         env = {**os.environ, **{v: str(self.threads) for v in
                                 ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}}
         f = open(log, "a")  # (appended: a resumed job's log keeps its earlier runs)
+        start = f.tell()  # where this run's lines begin
         self.running[job] = (subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env), f,
-                             f.tell())
+                             start)
 
     def finished(self) -> list[tuple[Job, str | None]]:
         """Jobs that ended since the last call, each with None or its error in one line (the
@@ -151,7 +152,7 @@ class RayJobs:
     def start(self, plan: Plan, out: Path, job: Job, log: Path) -> None:
         # resolved: a worker on another node starts in another directory
         self.running[job] = self.remote.remote(plan.to_dict(), str(out.resolve()), job.kind, job.task,
-                                               job.spec, 1, source_digest(), str(log))
+                                               job.spec, 1, source_digest(), str(log.resolve()))
 
     def finished(self) -> list[tuple[Job, str | None]]:
         if not self.running:
@@ -261,18 +262,20 @@ def run(plan: Plan, out: Path, jobs: int = 1, backend: str = "local",
         raise ValueError("jobs must be >= 1")
     out = Path(out)
     (out / "logs").mkdir(parents=True, exist_ok=True)
-    with _holding(out / LOCK):
+    with contextlib.ExitStack() as held:
+        for task in sorted(plan.tasks):
+            held.enter_context(_holding(out / task / LOCK))
         return _run(plan, out, jobs, backend, progress or Progress(plan, out), poll_s)
 
 
 def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
          poll_s: float) -> dict[Job, str]:
-    stages.check_data(plan, out)
     logs = out / "logs"
     for task in dict.fromkeys(t for t, _ in plan.cells()):
         for old, new in stages.retire_other_versions(plan, out, task):
             progress.show(set(), {}, f"{old} was made on another version of {task}: "
                                      f"moved to {new.name}")
+    stages.check_data(plan, out)
     needs = plan_jobs(plan, out)
     pool = (LocalJobs(max(1, usable_cores() // jobs)) if backend == "local"
             else RayJobs())
@@ -280,8 +283,12 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
     done: set[Job] = set()
     failed: dict[Job, str] = {}
     main = threading.current_thread() is threading.main_thread()
-    # terminated or hung up: stop the jobs as Ctrl-C does (handlers belong to the main thread)
-    handlers = {sig: signal.signal(sig, _interrupt) for sig in STOPS} if main else {}
+    # terminated or hung up: stop the jobs as Ctrl-C does (handlers belong to the main thread);
+    # a signal ignored already stays ignored (nohup's SIGHUP)
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, *STOPS)} if main else {}
+    for sig in STOPS:
+        if sig in handlers and handlers[sig] is not signal.SIG_IGN:
+            signal.signal(sig, _interrupt)
     try:
         # counted every minute as it runs: a table killed outright keeps its time but a minute
         with clock.timed(out, "table_wall_s"):
@@ -308,28 +315,23 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
                         time.sleep(poll_s)
                         progress.show(set(pool.running), failed)
             finally:
-                _stop(pool, main)
+                # from here a second Ctrl-C or SIGTERM is ignored: it would leave jobs running
+                # and the table's clock without its last minute
+                for sig in handlers:
+                    signal.signal(sig, signal.SIG_IGN)
+                pool.stop()
     finally:
         for sig, handler in handlers.items():
-            signal.signal(sig, handler)
+            if handler is not None:  # (None: set outside Python, left as it is)
+                signal.signal(sig, handler)
     return failed
 
 
-def _stop(pool, main: bool) -> None:
-    """The running jobs stopped; a second Ctrl-C or SIGTERM meanwhile does not cut it short
-    (it would leave jobs running and the table's clock unwritten)."""
-    held = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, *STOPS)} if main else {}
-    try:
-        pool.stop()
-    finally:
-        for sig, handler in held.items():
-            signal.signal(sig, handler)
-
-
-@contextmanager
+@contextlib.contextmanager
 def _holding(path: Path):
     """An exclusive lock on ``path`` (released when the process ends, however it ends), or a
     one-line error naming the process that holds it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     f: IO[str] = open(path, "a+")
     try:
         try:

@@ -2,10 +2,9 @@
 training data (its demonstrations; with ``rendered_copies`` their rendered layout copies; the
 frozen backbones' features, so that the training jobs beside each other only read them), train
 the cell's checkpoint, evaluate it. Wall times accumulate in each folder's ``timing.json``
-(``suite.clock``) with the machines they ran on: a data stage's minute by minute as it runs,
-an evaluation's when a call completes it (a call killed midway loses its own time, not the
-episodes it saved); a training's is the one its saved state counts (``training.state.Kept``),
-every piece up to its last save."""
+(``suite.clock``) with the machines they ran on: a data stage's and an evaluation's minute by
+minute as it runs (a call killed midway keeps its time up to the last minute); a training's is
+the one its saved state counts (``training.state.Kept``), every piece up to its last save."""
 
 from __future__ import annotations
 
@@ -57,7 +56,9 @@ def check_data(plan: Plan, out: Path) -> None:
     train on, or report, the other table's. ValueError in one line where they are not."""
     for task in plan.tasks:
         root = plan.data_dir(out, task)
-        if not (root / "meta" / "info.json").exists():
+        # (a dataset of another task version is not this table's either way: a run moves it
+        # aside, a report shows none of its cells)
+        if not (root / "meta" / "info.json").exists() or made_on(root, task) != get_task(task).gym_id:
             continue
         ds = Dataset(root)
         what = differences(ds.rmbench.get("collection") or {},
