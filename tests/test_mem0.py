@@ -150,7 +150,37 @@ def test_event_window_fills_on_the_episode_phase_and_outlives_subtask_ends(mn_ck
     # the episode's first frame fills it, then every memory_every-th step enters: 0, 2, 4, 6
     assert policy.cfg.event_window == 4 and TINY.memory_every == 2
     want = torch.stack([zs[0], zs[2], zs[4], zs[6]])
-    assert torch.allclose(policy.events.entries[0], want, atol=1e-6)
+    assert len(policy.event_windows) == 1
+    assert torch.allclose(policy.event_windows[0].entries[0], want, atol=1e-6)
+    env.close()
+
+
+def test_event_windows_by_phase_read_entries_whole_strides_old(mn_ckpt):
+    """With event_phases the classifier reads, at every step, entries 1, 2, 3, 4 strides old
+    (those of the step's phase), as training's walks at the stride give it; each phase's
+    window starts from its own first frame, as a walk starting there does."""
+    env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
+    policy = Mem0Policy(f"{mn_ckpt}?event_phases=true", env)
+    assert TINY.memory_every == 2 and len(policy.event_windows) == 2
+    read = []
+    end_logit = policy.model.executor.end_logit
+
+    def spy(c, z, events):
+        read.append(events.entries[0].clone())
+        return end_logit(c, z, events)
+
+    policy.model.executor.end_logit = spy
+    obs, info = env.reset(seed=100000)
+    policy.reset(info["instruction"], {"seed": 100000})
+    zs = []
+    for t in range(9):
+        zs.append(policy.model.executor.encode(policy.inputs(obs))[1][0])
+        policy.act(obs)
+        obs, *_ = env.step(np.asarray(obs["agent_pos"]) + 0.01 * (t + 1))
+    z = torch.stack(zs)
+    assert torch.allclose(read[8], z[[0, 2, 4, 6]], atol=1e-6)
+    assert torch.allclose(read[7], z[[1, 1, 3, 5]], atol=1e-6)
+    assert torch.allclose(read[1], z[[1, 1, 1, 1]], atol=1e-6)
     env.close()
 
 

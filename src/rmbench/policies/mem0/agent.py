@@ -178,7 +178,8 @@ class Mem0Policy(BasePolicy):
         slots = self.slots
         is_live = torch.zeros(n, dtype=torch.bool)
         is_live[live] = True
-        self.events.reset(self._mask(lambda s: s.t == 0, live, n), z)
+        for w, window in enumerate(self.event_windows):  # each from its phase's first step
+            window.reset(self._mask(lambda s, w=w: s.t == w, live, n), z)
         for i in live:
             s = slots[i]
             if s.t == 0:
@@ -223,7 +224,8 @@ class Mem0Policy(BasePolicy):
                     self.subtask_ended(per_row[i], i)
         # The event window is filled on the episode's phase, as training walks it: the
         # classifier compares each step with the last entries, whichever subtask wrote them.
-        self.events.push(z, self._mask(lambda s: s.t % cfg.memory_every == 0, live, n))
+        for w, window in enumerate(self.event_windows):
+            window.push(z, self._mask(lambda s, w=w: s.t % cfg.memory_every == w, live, n))
         for i in live:
             slots[i].t += 1
             slots[i].subtask_t += 1
@@ -245,12 +247,13 @@ class Mem0Policy(BasePolicy):
             return
         cfg, keep = self.cfg, min(len(self.slots), n)
         memory = MemoryStore(n, cfg.step_tokens, cfg.sliding_window, cfg.dim)
-        events = EventWindow(n, cfg.event_window, cfg.dim)
+        phases = cfg.memory_every if cfg.event_phases else 1
+        windows = [EventWindow(n, cfg.event_window, cfg.dim) for _ in range(phases)]
         if keep:
-            for new, old in ((memory, self.memory), (events, self.events)):
+            for new, old in ((memory, self.memory), *zip(windows, self.event_windows, strict=True)):
                 new.load_state({k: torch.cat([v[:keep], getattr(new, k)[keep:]])
                                 for k, v in old.state().items()})
-        self.memory, self.events = memory, events
+        self.memory, self.event_windows = memory, windows
         self.slots = self.slots[:n] + [_Slot(cfg, self.goal) for _ in range(n - keep)]
 
     def _mask(self, test, live: list[int], n: int) -> torch.Tensor:
@@ -299,7 +302,18 @@ class Mem0Policy(BasePolicy):
 
     def end_probabilities(self, c: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
         """P(the subtask has ended) per row, before the debounce."""
-        return torch.sigmoid(self.model.executor.end_logit(c, z, self.events))
+        return torch.sigmoid(self.model.executor.end_logit(c, z, self.events_now()))
+
+    def events_now(self) -> EventWindow:
+        """The event window each slot's classifier reads at its current step: the one window,
+        or with ``event_phases`` the window of the step's phase."""
+        windows = self.event_windows
+        if len(windows) == 1:
+            return windows[0]
+        view = EventWindow(len(self.slots), self.cfg.event_window, self.cfg.dim)
+        view.entries.copy_(torch.stack([windows[s.t % len(windows)].entries[i]
+                                        for i, s in enumerate(self.slots)]))
+        return view
 
     def subtask_ended(self, inputs: list[torch.Tensor], slot: int = 0) -> None:
         """The end of ``slot``'s subtask, ``inputs`` its end frame's (one row)."""

@@ -27,7 +27,8 @@ class Mem0Config(ReadsObservation, PolicyConfig):
 
     # changeable at evaluation without retraining: mem0:CKPT?execute=5&flow_steps=20
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps", "sample_noise",
-                                                   "temporal_ensemble", "ensemble_every")
+                                                   "temporal_ensemble", "ensemble_every",
+                                                   "event_phases")
 
     # --- observation
     observation: str = "auto"
@@ -123,6 +124,13 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     than the demonstrations)."""
     event_window: int = 4
     """With end_classifier "event": z_img entries in the event window (4 at stride 5: 1 s)."""
+    event_phases: bool = False
+    """With end_classifier "event", in the closed loop: one event window per phase of the
+    memory stride, each step's frame entering its phase's, and the classifier reading the
+    window of the current step's phase, so that its entries are always 1, 2, ... strides old,
+    as in training (which walks each episode at the stride). Off: one window, filled every
+    ``memory_every`` steps and read at every step, its newest entry 0 to ``memory_every`` - 1
+    steps old."""
     end_window: int = 8
     """L: a subtask ends after L consecutive positive steps. With end_classifier "context" the
     last L frames of each subtask are the positives; with "event" the ``end_span`` frames
