@@ -985,3 +985,33 @@ def test_a_dataset_of_one_plan_step_per_episode_is_refused(mn_dataset, tmp_path,
     monkeypatch.setattr(Dataset, "episode", one_step)
     with pytest.raises(ValueError, match="every episode holds one step of its task's plan"):
         train_tiny(mn_dataset, tmp_path / "p", steps=1, cfg=TINY_STATE)
+
+
+def test_codec_frames_read_the_cameras_through_one_codec_stream_per_episode(mn_ckpt):
+    env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
+    policy = Mem0Policy(f"{mn_ckpt}?codec_frames=true", env)
+    seen = []
+    inputs = policy.inputs
+    policy.inputs = lambda observation: seen.append(observation["pixels"]) or inputs(observation)
+    obs, info = env.reset(seed=100000)
+    policy.reset(info["instruction"], {"seed": 100000})
+    raw = []
+    for _ in range(3):
+        raw.append(obs["pixels"])
+        policy.act(obs)
+        obs, *_ = env.step(np.asarray(obs["agent_pos"]))
+    codecs = policy.slots[0].codecs
+    assert set(codecs) == set(policy.cfg.cameras) and codecs["head"]._pts == 3
+    for frames, rendered in zip(seen, raw, strict=True):
+        for cam in policy.cfg.cameras:
+            assert frames[cam].shape == rendered[cam].shape
+            assert not np.array_equal(frames[cam], rendered[cam])  # what the codec keeps
+            assert np.abs(frames[cam].astype(int) - rendered[cam].astype(int)).mean() < 8
+    policy.reset(info["instruction"], {"seed": 100000})
+    assert policy.slots[0].codecs == {}  # a new episode, new streams
+    env.close()
+
+
+def test_codec_frames_is_refused_for_a_state_checkpoint(mn_state_ckpt):
+    with pytest.raises(ValueError, match="codec_frames passes camera frames"):
+        Mem0Policy(f"{mn_state_ckpt}?codec_frames=true")

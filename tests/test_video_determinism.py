@@ -44,3 +44,22 @@ def test_decode_gives_every_frame_encoded():
     # lossy, but each decoded frame is its own source frame's, in order
     errors = np.abs(decoded.astype(int)[:, None] - video.astype(int)[None]).mean(axis=(2, 3, 4))
     assert (errors.argmin(axis=1) == np.arange(len(video))).all()
+
+
+def test_frame_codec_gives_each_frame_back_as_the_dataset_would_store_it():
+    import pytest
+
+    from rmbench.video import FrameCodec, decode_video
+
+    y, x = np.mgrid[0:48, 0:64]
+    video = np.stack([np.stack([(x * 4 + t) % 256, (y * 5) % 256, (x + y + 3 * t) % 256], -1)
+                      for t in range(25)]).astype(np.uint8)  # smooth, moving
+    codec = FrameCodec()
+    coded = np.stack([codec(frame) for frame in video])  # one back per frame, at once
+    assert coded.shape == video.shape and coded.dtype == np.uint8
+    err = np.abs(coded.astype(int) - video.astype(int)).mean()
+    stored = np.abs(decode_video(encode(DATASET_CODEC, video)).astype(int) - video.astype(int)).mean()
+    assert 0 < err < 8 and 0 < stored < 8  # lossy, as much as the dataset's videos
+    assert np.array_equal(coded, np.stack([c for c in map(FrameCodec(), video)]))  # deterministic
+    with pytest.raises(ValueError, match="uint8"):
+        codec(video[0].astype(np.float32))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 
 import av
@@ -116,6 +117,43 @@ class VideoWriter:
     def __exit__(self, *exc):
         if exc[0] is None:
             self.close()
+
+
+class FrameCodec:
+    """Frames through a codec one at a time, each decoded back as it goes in: a frame as a
+    dataset stores it (RGB to 4:2:0, the codec's loss) for a policy trained on stored frames,
+    in closed loop. One stream per camera and episode, as a recorded episode's video. x264
+    runs without lookahead or B-frames (``tune=zerolatency``), so frame t comes back at step
+    t; the codec's other settings (CRF, preset, GOP) are kept."""
+
+    def __init__(self, fps: int = 20, codec: VideoCodec = DATASET_CODEC):
+        self.fps, self.codec = fps, codec
+        self._encoder: av.CodecContext | None = None
+        self._decoder: av.CodecContext | None = None
+        self._pts = 0
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
+            raise ValueError(f"video frames must be (H, W, 3) uint8, got {frame.shape} {frame.dtype}")
+        if self._encoder is None:
+            h, w = frame.shape[:2]
+            enc = av.CodecContext.create(self.codec.codec, "w")
+            enc.width, enc.height = w - w % 2, h - h % 2  # (yuv420p: even sizes, as Mp4Encoder)
+            enc.pix_fmt, enc.gop_size, enc.thread_count = self.codec.pix_fmt, self.codec.gop, 1
+            enc.time_base, enc.framerate = Fraction(1, self.fps), Fraction(self.fps, 1)
+            enc.options = {**Mp4Encoder(self.fps, self.codec).options(), "tune": "zerolatency"}
+            self._encoder = enc
+            self._decoder = av.CodecContext.create("h264", "r")
+            self._decoder.thread_count = 1
+        enc = self._encoder
+        image = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame[:enc.height, :enc.width]),
+                                           format="rgb24")
+        image.pts = self._pts
+        self._pts += 1
+        out = [f for packet in enc.encode(image) for f in self._decoder.decode(packet)]
+        if len(out) != 1:
+            raise RuntimeError(f"the codec gave {len(out)} frames for one (zerolatency expected)")
+        return out[0].to_ndarray(format="rgb24")
 
 
 def decode_video(source: str | Path | bytes) -> np.ndarray:

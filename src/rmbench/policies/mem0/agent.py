@@ -45,6 +45,7 @@ from rmbench.policies.mem0.planner import DONE
 from rmbench.policies.mem0.train import build_model, goal_text
 from rmbench.policies.nn.inference import inference
 from rmbench.policies.observation import camera_inputs, state_inputs, state_tensor
+from rmbench.video import FrameCodec
 
 
 def load_mem0(path: str | Path, ablations: tuple[str, ...] = (),
@@ -87,6 +88,7 @@ class _Slot:
         self.start_subtask = True
         self.stage = 0
         self.ends = 0  # subtask ends declared this episode (eval/boundaries.py reads them)
+        self.codecs: dict[str, FrameCodec] = {}  # per camera, with codec_frames
 
 
 def _first_slot(name: str) -> property:
@@ -129,6 +131,9 @@ class Mem0Policy(BasePolicy):
             raise ValueError("gt_classifier reads the simulator's subtask boundary: it cannot be "
                              "served remotely")
         self.ee = EEActions() if cfg.action_space == "ee" else None
+        if cfg.codec_frames and cfg.reads_state:
+            raise ValueError("codec_frames passes camera frames through the dataset codec; this "
+                             "checkpoint reads the state observation")
         self.decompose = self.describe["tmc"] == "M(n)"
         self.goal = self.describe["executor_texts"].index(goal_text(self.describe["task"]))
         self.done = self.describe["planner_texts"].index(DONE)
@@ -169,6 +174,9 @@ class Mem0Policy(BasePolicy):
         if not live:
             return [None] * n
         self._resize(n)
+        if cfg.codec_frames:  # the frames as a dataset stores them
+            observations = [o if o is None else self._stored(o, self.slots[i])
+                            for i, o in enumerate(observations)]
         # idle rows copy a live one: every call runs on n rows of real inputs
         rows = [o if o is not None else observations[live[0]] for o in observations]
         converted = {i: self.inputs(observations[i]) for i in live}  # idle rows reuse one
@@ -303,6 +311,14 @@ class Mem0Policy(BasePolicy):
     def end_probabilities(self, c: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
         """P(the subtask has ended) per row, before the debounce."""
         return torch.sigmoid(self.model.executor.end_logit(c, z, self.events_now()))
+
+    def _stored(self, observation: dict[str, Any], slot: _Slot) -> dict[str, Any]:
+        """``observation`` with the policy's cameras through the slot's codec streams."""
+        pixels = dict(observation.get("pixels") or {})
+        for cam in self.cfg.cameras:
+            if cam in pixels:
+                pixels[cam] = slot.codecs.setdefault(cam, FrameCodec())(np.asarray(pixels[cam]))
+        return {**observation, "pixels": pixels}
 
     def events_now(self) -> EventWindow:
         """The event window each slot's classifier reads at its current step: the one window,

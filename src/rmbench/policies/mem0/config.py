@@ -28,7 +28,7 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     # changeable at evaluation without retraining: mem0:CKPT?execute=5&flow_steps=20
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps", "sample_noise",
                                                    "temporal_ensemble", "ensemble_every",
-                                                   "event_phases")
+                                                   "event_phases", "codec_frames")
 
     # --- observation
     observation: str = "auto"
@@ -124,6 +124,10 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     than the demonstrations)."""
     event_window: int = 4
     """With end_classifier "event": z_img entries in the event window (4 at stride 5: 1 s)."""
+    codec_frames: bool = False
+    """Camera policies, in the closed loop: each camera's frames pass through the dataset codec
+    (``video.FrameCodec``, one stream per episode) before they are read, as the frames the
+    policy trained on were stored; off, it reads them as rendered."""
     event_phases: bool = False
     """With end_classifier "event", in the closed loop: one event window per phase of the
     memory stride, each step's frame entering its phase's, and the classifier reading the
