@@ -39,6 +39,10 @@ class VideoCodec:
     pix_fmt: str = "yuv420p"
     mbtree: bool = False
 
+    def options(self) -> dict[str, str]:
+        """The encoder's private options (libx264's)."""
+        return {"crf": str(self.crf), "preset": self.preset, "x264-params": f"mbtree={int(self.mbtree)}"}
+
     def info(self) -> dict:
         return {"video.codec": "h264", "video.pix_fmt": self.pix_fmt, "video.crf": self.crf,
                 "video.g": self.gop, "video.preset": self.preset, "video.mbtree": self.mbtree}
@@ -60,9 +64,8 @@ class Mp4Encoder:
         self._stream = None
 
     def options(self) -> dict[str, str]:
-        """The encoder's private options (libx264's)."""
-        return {"crf": str(self.codec.crf), "preset": self.codec.preset,
-                "x264-params": f"mbtree={int(self.codec.mbtree)}"}
+        """The encoder's private options (its codec's)."""
+        return self.codec.options()
 
     def add(self, frame: np.ndarray) -> None:
         if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
@@ -141,7 +144,7 @@ class FrameCodec:
             enc.width, enc.height = w - w % 2, h - h % 2  # (yuv420p: even sizes, as Mp4Encoder)
             enc.pix_fmt, enc.gop_size, enc.thread_count = self.codec.pix_fmt, self.codec.gop, 1
             enc.time_base, enc.framerate = Fraction(1, self.fps), Fraction(self.fps, 1)
-            enc.options = {**Mp4Encoder(self.fps, self.codec).options(), "tune": "zerolatency"}
+            enc.options = {**self.codec.options(), "tune": "zerolatency"}
             self._encoder = enc
             self._decoder = av.CodecContext.create("h264", "r")
             self._decoder.thread_count = 1
