@@ -135,18 +135,30 @@ def test_event_labels_mark_the_frames_just_after_each_step_ends():
     assert TINY.end_span == 4 and Mem0Config().end_span == 12  # 1.5 L: fires once per end
 
 
-def test_event_window_fills_on_the_episode_phase_and_outlives_subtask_ends(mn_ckpt):
-    env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
-    policy = Mem0Policy(f"{mn_ckpt}?ablation=gt_classifier", env)
+def walk(policy, env, steps: int, after=None) -> list[torch.Tensor]:
+    """``steps`` steps of press_button's seed 100000 by ``policy``, the arms nudged a little
+    more each step (``after(t, obs)`` after each act); each step's z_img."""
     obs, info = env.reset(seed=100000)
     policy.reset(info["instruction"], {"seed": 100000})
     zs = []
-    for t in range(7):
+    for t in range(steps):
         zs.append(policy.model.executor.encode(policy.inputs(obs))[1][0])
         policy.act(obs)
-        if t == 2:  # a subtask ends: the sliding memory starts again, the event window not
-            policy.subtask_ended(policy.inputs(obs))
+        if after is not None:
+            after(t, obs)
         obs, *_ = env.step(np.asarray(obs["agent_pos"]) + 0.01 * (t + 1))
+    return zs
+
+
+def test_event_window_fills_on_the_episode_phase_and_outlives_subtask_ends(mn_ckpt):
+    env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
+    policy = Mem0Policy(f"{mn_ckpt}?ablation=gt_classifier", env)
+
+    def end_at_2(t, obs):  # a subtask ends: the sliding memory starts again, the event window not
+        if t == 2:
+            policy.subtask_ended(policy.inputs(obs))
+
+    zs = walk(policy, env, 7, end_at_2)
     # the episode's first frame fills it, then every memory_every-th step enters: 0, 2, 4, 6
     assert policy.cfg.event_window == 4 and TINY.memory_every == 2
     want = torch.stack([zs[0], zs[2], zs[4], zs[6]])
@@ -170,14 +182,7 @@ def test_event_windows_by_phase_read_entries_whole_strides_old(mn_ckpt):
         return end_logit(c, z, events)
 
     policy.model.executor.end_logit = spy
-    obs, info = env.reset(seed=100000)
-    policy.reset(info["instruction"], {"seed": 100000})
-    zs = []
-    for t in range(9):
-        zs.append(policy.model.executor.encode(policy.inputs(obs))[1][0])
-        policy.act(obs)
-        obs, *_ = env.step(np.asarray(obs["agent_pos"]) + 0.01 * (t + 1))
-    z = torch.stack(zs)
+    z = torch.stack(walk(policy, env, 9))
     assert torch.allclose(read[8], z[[0, 2, 4, 6]], atol=1e-6)
     assert torch.allclose(read[7], z[[1, 1, 3, 5]], atol=1e-6)
     assert torch.allclose(read[1], z[[1, 1, 1, 1]], atol=1e-6)

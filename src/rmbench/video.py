@@ -53,6 +53,19 @@ DATASET_CODEC = VideoCodec()
 PREVIEW_CODEC = VideoCodec(crf=23, preset="veryfast", gop=250)
 
 
+def check_frame(frame: np.ndarray) -> None:
+    """A video frame is (H, W, 3) uint8; ValueError otherwise."""
+    if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
+        raise ValueError(f"video frames must be (H, W, 3) uint8, got {frame.shape} {frame.dtype}")
+
+
+def even_size(frame: np.ndarray) -> tuple[int, int]:
+    """(width, height) a frame is encoded at: yuv420p needs even sizes, so odd ones lose their
+    last row/column."""
+    h, w = frame.shape[:2]
+    return w - w % 2, h - h % 2
+
+
 class Mp4Encoder:
     """Streams RGB uint8 frames (H, W, 3) into an MP4 held in memory."""
 
@@ -68,14 +81,11 @@ class Mp4Encoder:
         return self.codec.options()
 
     def add(self, frame: np.ndarray) -> None:
-        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
-            raise ValueError(f"video frames must be (H, W, 3) uint8, got {frame.shape} {frame.dtype}")
+        check_frame(frame)
         if self._container is None:
-            h, w = frame.shape[:2]
             self._container = av.open(self._buf, mode="w", format="mp4")
             s = self._container.add_stream(self.codec.codec, rate=self.fps)
-            # yuv420p needs even sizes; odd ones lose their last row/column.
-            s.width, s.height = w - w % 2, h - h % 2
+            s.width, s.height = even_size(frame)
             s.pix_fmt = self.codec.pix_fmt
             s.codec_context.gop_size = self.codec.gop
             # One thread: x264's slices and PyAV's colour conversion then do not depend on how
@@ -136,12 +146,10 @@ class FrameCodec:
         self._pts = 0
 
     def __call__(self, frame: np.ndarray) -> np.ndarray:
-        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
-            raise ValueError(f"video frames must be (H, W, 3) uint8, got {frame.shape} {frame.dtype}")
+        check_frame(frame)
         if self._encoder is None:
-            h, w = frame.shape[:2]
             enc = av.CodecContext.create(self.codec.codec, "w")
-            enc.width, enc.height = w - w % 2, h - h % 2  # (yuv420p: even sizes, as Mp4Encoder)
+            enc.width, enc.height = even_size(frame)
             enc.pix_fmt, enc.gop_size, enc.thread_count = self.codec.pix_fmt, self.codec.gop, 1
             enc.time_base, enc.framerate = Fraction(1, self.fps), Fraction(self.fps, 1)
             enc.options = {**self.codec.options(), "tune": "zerolatency"}

@@ -232,10 +232,10 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
     demonstrations, their rendered copies, the frozen backbones' features; their summary."""
     from rmbench.data.layout_copies import copy_layouts
 
-    root = plan.data_dir(out, task)
+    root, asked = plan.data_dir(out, task), collect_config(plan, out, task, workers, progress)
     if not demos_collected(plan, out, task):
         with timed(root.parent, "collect_wall_s"):
-            collect(collect_config(plan, out, task, workers, progress))
+            collect(asked)
     if plan.rendered_copies and copies_done(plan, out, task) is None:
         with timed(root.parent, "copies_wall_s"):
             summary = copy_layouts(root, plan.train_data_dir(out, task), plan.rendered_copies,
@@ -253,9 +253,8 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
             with timed(root.parent, "layout_copies_wall_s"):
                 solve_layout_copies(data, n, reach, COPIES_SEED, workers)
     ds, timing = Dataset(root), read_json(root.parent / TIMING, {})
-    width, height = COLLECT_CAMERAS[plan.obs][1]
     return {"path": str(root), "episodes": ds.num_episodes, "frames": ds.num_frames,
-            "cameras": list(ds.cameras), "resolution": f"{width}x{height}",
+            "cameras": list(ds.cameras), "resolution": f"{asked.width}x{asked.height}",
             "environment_state": ds.state_names is not None,
             "noise": NoiseSpec(plan.noise_kind, plan.noise).to_dict() if plan.noise else None,
             "rendered_copies": copies_done(plan, out, task),
