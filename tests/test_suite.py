@@ -756,3 +756,89 @@ def test_a_table_under_nohup_keeps_sighup_ignored(tmp_path, monkeypatch):
         assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN  # as it was
     finally:
         signal.signal(signal.SIGHUP, before)
+
+
+def test_idle_slots_go_to_a_collection_or_an_evaluation_that_can_use_them(tmp_path, monkeypatch):
+    """With two slots: a collection started alone takes both; a running one is restarted on
+    the slot another job left when nothing else can start; a training keeps one slot (its
+    float sums depend on its threads) and leaves the other idle."""
+    J = runner.Job
+    a, b = J("collect", "put_back_block"), J("collect", "press_button")
+    train, ev = J("train", "put_back_block", "dp"), J("eval", "put_back_block", "dp")
+    needs = {a: (), b: (), train: (a,), ev: (train,)}
+    polls = {a: 4, b: 1, train: 2, ev: 1}  # each job's polls until it ends, once started
+    events = []
+
+    class Pool:
+        grows = True
+
+        def __init__(self, threads):
+            self.running, self.slots, self.left = {}, {}, {}
+
+        def held(self):
+            return sum(self.slots[j] for j in self.running)
+
+        def start(self, plan, out, job, log, slots=1):
+            self.running[job], self.slots[job], self.left[job] = None, slots, polls[job]
+            events.append(("start", job.name, slots))
+
+        def restart(self, plan, out, job, log, slots):
+            del self.running[job]
+            events.append(("stop", job.name, self.slots[job]))
+            self.start(plan, out, job, log, slots)
+
+        def finished(self):
+            for job in list(self.running):
+                self.left[job] -= 1
+            ended = [j for j in self.running if self.left[j] <= 0]
+            for job in ended:
+                del self.running[job]
+                events.append(("end", job.name, self.slots[job]))
+            return [(job, None) for job in ended]
+
+        def stop(self):
+            self.running.clear()
+
+    monkeypatch.setattr(runner, "plan_jobs", lambda plan, out: dict(needs))
+    monkeypatch.setattr(runner, "LocalJobs", Pool)
+    plan = Plan("state", ("put_back_block", "press_button"), ("dp",))
+    assert runner.run(plan, tmp_path, jobs=2, poll_s=0,
+                      progress=runner.Progress(plan, tmp_path, stream=io.StringIO())) == {}
+    assert events == [
+        ("start", "collect put_back_block", 1), ("start", "collect press_button", 1),
+        ("end", "collect press_button", 1),
+        ("stop", "collect put_back_block", 1), ("start", "collect put_back_block", 2),
+        ("end", "collect put_back_block", 2),
+        ("start", "train put_back_block dp", 1),  # one slot idle: nothing may take it
+        ("end", "train put_back_block dp", 1),
+        ("start", "eval put_back_block dp", 2), ("end", "eval put_back_block dp", 2)]
+    # three slots, two jobs ready: one each, the last the third when it may grow
+    assert runner.shares([train, a], 3, grows=True) == [(train, 1), (a, 2)]
+    assert runner.shares([a, train], 3, grows=True) == [(a, 1), (train, 1)]
+    assert runner.shares([a, b, train], 2, grows=True) == [(a, 1), (b, 1)]
+    assert runner.shares([a], 2, grows=False) == [(a, 1)]
+
+
+def test_a_job_restarted_on_more_slots_stops_and_gets_their_threads(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+
+    popen, started = subprocess.Popen, []
+
+    def fake(cmd, **kw):
+        started.append((cmd[cmd.index("--threads") + 1], kw["env"]["OMP_NUM_THREADS"]))
+        return popen([sys.executable, "-c", "import time; time.sleep(60)"], **kw)
+
+    monkeypatch.setattr(runner.subprocess, "Popen", fake)
+    pool = runner.LocalJobs(3)
+    job = runner.Job("collect", "put_back_block")
+    plan = Plan("state", ("put_back_block",), ("dp",))
+    pool.start(plan, tmp_path, job, tmp_path / "job.log")
+    first = pool.running[job][0]
+    pool.restart(plan, tmp_path, job, tmp_path / "job.log", 2)
+    try:
+        assert first.poll() is not None  # stopped before its successor started
+        assert started == [("3", "3"), ("6", "6")] and pool.held() == 2
+    finally:
+        pool.stop()
+    assert pool.held() == 0

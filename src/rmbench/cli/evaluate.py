@@ -266,7 +266,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--jobs", type=int, default=1,
                    help="jobs at once (local: each a process with (usable cores) / --jobs "
                         "torch threads, usable being this process's affinity; on a shared "
-                        "machine start the table under taskset -c)")
+                        "machine start the table under taskset -c). Where no other job can "
+                        "start, a collection or evaluation takes the idle jobs' cores too")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="ray: jobs on a Ray cluster (RAY_ADDRESS); --out on a shared file system")
     p.add_argument("--report-only", action="store_true",

@@ -6,7 +6,10 @@ processes or on Ray, with a progress grid across the whole table.
 Each job is a fresh process (``python -m rmbench.suite.job``) with ``cores / jobs`` torch
 threads (a collect or evaluation job: as many worker processes) and its own log in
 ``OUT/logs``; on Ray each is a task with one CPU, and ``OUT`` must be a file system every
-node sees (the stages read and write their folders there). A
+node sees (the stages read and write their folders there). Locally, slots no job can take
+go to a collect or evaluation job (``GROWS``): one started with them, or one running,
+restarted with them (it resumes). A camera table's last task otherwise makes its data, for
+hours, on one slot of two. A
 job that fails is reported with its log and its dependants are skipped; the others go on.
 Interrupted (Ctrl-C, SIGTERM, a closed terminal), the running jobs stop and what they saved
 stays: a re-run of the same command plans only what is missing. One table at a time runs a task in an
@@ -35,6 +38,9 @@ from rmbench.suite.plan import Plan, executor_spec, trained_spec
 
 BACKENDS = ("local", "ray")
 PRIORITY = {"collect": 0, "eval": 1, "train": 2}  # within a task: unblock others, results early
+# kinds whose results do not depend on their number of worker processes and that resume where
+# they stopped: idle slots may be given to them (a training's float sums depend on its threads)
+GROWS = ("collect", "eval")
 LOCK = ".table.lock"
 STOPS = (signal.SIGTERM, signal.SIGHUP)  # stop the table as Ctrl-C does
 
@@ -91,23 +97,43 @@ def plan_jobs(plan: Plan, out: Path) -> dict[Job, tuple[Job, ...]]:
 
 # ------------------------------------------------------------------------------ backends
 class LocalJobs:
-    """Each job a subprocess of this Python; ``stop`` terminates the running ones."""
+    """Each job a subprocess of this Python, on ``slots`` of the table's slots of ``threads``
+    cores each; ``stop`` terminates the running ones."""
+
+    grows = True
 
     def __init__(self, threads: int):
         self.threads = threads
-        self.running: dict[Job, tuple[subprocess.Popen, TextIO]] = {}
+        self.running: dict[Job, tuple[subprocess.Popen, TextIO, int]] = {}
+        self.slots: dict[Job, int] = {}
 
-    def start(self, plan: Plan, out: Path, job: Job, log: Path) -> None:
+    def held(self) -> int:
+        """The slots the running jobs hold."""
+        return sum(self.slots[job] for job in self.running)
+
+    def start(self, plan: Plan, out: Path, job: Job, log: Path, slots: int = 1) -> None:
+        threads = self.threads * slots
         cmd = [sys.executable, "-m", "rmbench.suite.job", "--plan", json.dumps(plan.to_dict()),
                "--out", str(out), "--kind", job.kind, "--task", job.task, "--spec", job.spec,
-               "--threads", str(self.threads), "--digest", source_digest(),
+               "--threads", str(threads), "--digest", source_digest(),
                "--parent", str(os.getpid())]
-        env = {**os.environ, **{v: str(self.threads) for v in
+        env = {**os.environ, **{v: str(threads) for v in
                                 ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}}
         f = open(log, "a")  # (appended: a resumed job's log keeps its earlier runs)
         start = f.tell()  # where this run's lines begin
         self.running[job] = (subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env), f,
                              start)
+        self.slots[job] = slots
+
+    def restart(self, plan: Plan, out: Path, job: Job, log: Path, slots: int) -> None:
+        """Stop ``job`` and start it again on ``slots`` slots: it resumes from what it saved
+        (a collection's committed episodes, an evaluation's finished ones), losing what its
+        workers had in hand."""
+        proc, f, _ = self.running.pop(job)
+        proc.terminate()
+        proc.wait()
+        f.close()
+        self.start(plan, out, job, log, slots)
 
     def finished(self) -> list[tuple[Job, str | None]]:
         """Jobs that ended since the last call, each with None or its error in one line (the
@@ -138,6 +164,8 @@ class LocalJobs:
 class RayJobs:
     """Each job a Ray task with one CPU (``RAY_ADDRESS`` or a local Ray instance)."""
 
+    grows = False  # (Ray places its tasks: one CPU each)
+
     def __init__(self):
         try:
             import ray
@@ -149,7 +177,10 @@ class RayJobs:
         self.remote = ray.remote(num_cpus=1, max_retries=0)(run_job)
         self.running: dict[Job, object] = {}
 
-    def start(self, plan: Plan, out: Path, job: Job, log: Path) -> None:
+    def held(self) -> int:
+        return len(self.running)
+
+    def start(self, plan: Plan, out: Path, job: Job, log: Path, slots: int = 1) -> None:
         # resolved: a worker on another node starts in another directory
         self.running[job] = self.remote.remote(plan.to_dict(), str(out.resolve()), job.kind, job.task,
                                                job.spec, 1, source_digest(), str(log.resolve()))
@@ -300,10 +331,19 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
                             pending.remove(job)
                             failed[job] = ("skipped: " + " and ".join(
                                 d.name for d in needs[job] if d in failed) + " failed")
-                        elif len(pool.running) < jobs and all(d in done for d in needs[job]):
-                            pending.remove(job)
-                            pool.start(plan, out, job, logs / job.log_name)
-                            progress.show(set(pool.running), failed, f"started {job.name}")
+                    ready = [j for j in pending if all(d in done for d in needs[j])]
+                    for job, slots in shares(ready, jobs - pool.held(), pool.grows):
+                        pending.remove(job)
+                        pool.start(plan, out, job, logs / job.log_name, slots)
+                        progress.show(set(pool.running), failed, f"started {job.name}"
+                                      + (f" on {slots} slots" if slots > 1 else ""))
+                    grown = grow(pool, jobs, [j for j in ready if j in pending])
+                    if grown is not None:
+                        pool.restart(plan, out, grown, logs / grown.log_name,
+                                     pool.slots[grown] + jobs - pool.held())
+                        progress.show(set(pool.running), failed,
+                                      f"restarted {grown.name} on {pool.slots[grown]} slots: "
+                                      f"no other job can start")
                     for job, error in pool.finished():
                         if error is None:
                             done.add(job)
@@ -325,6 +365,25 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
             if handler is not None:  # (None: set outside Python, left as it is)
                 signal.signal(sig, handler)
     return failed
+
+
+def shares(ready: list[Job], free: int, grows: bool) -> list[tuple[Job, int]]:
+    """The ``ready`` jobs that start on the ``free`` slots, each with its slots: one each, and
+    the last of them the rest when its kind is in ``GROWS``."""
+    started = [[job, 1] for job in ready[:max(0, free)]]
+    if started and grows and started[-1][0].kind in GROWS:
+        started[-1][1] += free - len(started)
+    return [(job, slots) for job, slots in started]
+
+
+def grow(pool, jobs: int, waiting: list[Job]) -> Job | None:
+    """The running job to restart on the slots left idle when no job is ready to take them
+    (``waiting``: the ready ones not started): the ``GROWS`` one on the fewest slots (the
+    first started among equals), or None."""
+    if not pool.grows or waiting or pool.held() >= jobs:
+        return None
+    growable = [j for j in pool.running if j.kind in GROWS]
+    return min(growable, key=lambda j: pool.slots[j], default=None)
 
 
 @contextlib.contextmanager
