@@ -404,6 +404,43 @@ def test_progress_in_a_log_shows_a_training_between_its_start_and_end(tmp_path):
     assert quiet.getvalue().count("rmbench table") == 1
 
 
+def test_a_camera_tables_data_shows_the_part_under_way(tmp_path):
+    """A camera table's data job spends most of its hours after the demonstrations: rendering
+    their copies, then caching features. The grid names the part and its progress instead of
+    "data 100%" for all of them."""
+    from rmbench.policies.feature_cache import default_dir
+
+    plan = Plan("pixels", ("put_back_block",), ("mem0", "mem0:no_memory"), demos=4,
+                rendered_copies=2, sets=('backbone="efficientnet_lite0"',))
+    running = {runner.Job("collect", "put_back_block")}
+    show = lambda: runner.Progress(plan, tmp_path).cell("put_back_block", "mem0", running, {})  # noqa: E731
+    data, copies = plan.data_dir(tmp_path, "put_back_block"), plan.train_data_dir(tmp_path, "put_back_block")
+
+    def episodes(root, n):
+        (root / "meta").mkdir(parents=True, exist_ok=True)
+        (root / "meta" / "info.json").write_text(json.dumps({"total_episodes": n}))
+
+    assert show() == "demos 0%"
+    episodes(data, 3)
+    assert show() == "demos 75%"
+    episodes(data, 4)
+    episodes(copies, 6)  # of 4 x (1 + 2)
+    assert show() == "copies 50%"
+    episodes(copies, 12)
+    stages.copies_record(plan, tmp_path, "put_back_block").write_text(
+        json.dumps({"source_episodes": 4}))
+    cfg = plan.config("put_back_block", "mem0")
+    folder = default_dir(copies, cfg.backbone, cfg.backbone_stride, tuple(cfg.image_size))
+    assert show() == "features 0%"
+    for cam in cfg.cameras:
+        (folder / cam).mkdir(parents=True)
+        for e in range(6):
+            (folder / cam / f"episode-{e:06d}-10-20.npy").write_bytes(b"")
+    (folder / cfg.cameras[0] / "episode-000000-11-21.npy").write_bytes(b"")  # (an older one)
+    assert show() == "features 50%"
+    assert stages.fraction(plan, tmp_path, "collect", "put_back_block") == 0.5
+
+
 def test_a_job_spends_its_share_of_the_cores(tmp_path, monkeypatch):
     """A job given two threads collects and evaluates with two worker processes."""
     from rmbench.suite.job import run_job, source_digest

@@ -74,6 +74,22 @@ def features_key(camera: str) -> str:
     return FEATURES_PREFIX + camera
 
 
+def default_dir(root: Path, backbone: str, stride: int, size: tuple[int, int]) -> Path:
+    """Where a dataset at ``root`` keeps ``backbone``'s features at ``stride`` of its frames
+    resized to ``size`` = (height, width): one folder per camera."""
+    return (Path(root) / ".cache"
+            / f"features-v{FEATURES_VERSION}-{backbone}-s{stride}-{size[1]}x{size[0]}")
+
+
+def cached_episodes(folder: Path) -> int:
+    """How many episodes a camera's folder holds features of (for a progress display: a file
+    left by an earlier collection into the same dataset counts too, once per episode)."""
+    try:
+        return len({p.name.split("-")[1] for p in Path(folder).glob("episode-*.npy")})
+    except OSError:
+        return 0
+
+
 class FeatureCache:
     """Features of each (episode, camera) by ``backbone`` at ``stride`` of the frames resized
     to ``size`` = (height, width), as .npy files, memory-mapped."""
@@ -83,8 +99,8 @@ class FeatureCache:
         self.ds, self.backbone, self.stride = dataset, backbone, stride
         self.size = (int(size[0]), int(size[1]))
         self.shape = feature_shape(stride, self.size)
-        tag = f"features-v{FEATURES_VERSION}-{backbone}-s{stride}-{self.size[1]}x{self.size[0]}"
-        self.dir = Path(cache_dir) if cache_dir is not None else dataset.root / ".cache" / tag
+        self.dir = (Path(cache_dir) if cache_dir is not None
+                    else default_dir(dataset.root, backbone, stride, self.size))
         self._open: dict[tuple[int, str], np.ndarray] = {}
 
     def path(self, episode: int, camera: str) -> Path:

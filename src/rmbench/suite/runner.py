@@ -245,7 +245,8 @@ class Progress:
         if tr in running:
             return f"train {stages.fraction(plan, out, 'train', task, spec):.0%}"
         if Job("collect", task) in running:
-            return f"data {stages.fraction(plan, out, 'collect', task):.0%}"
+            part, done = stages.data_progress(plan, out, task)
+            return f"{part} {done:.0%}"
         return "."
 
     def _with_clock(self, grid: str) -> str:
@@ -263,7 +264,7 @@ class Progress:
         finished = sum(v.endswith("%") and " " not in v for v in grid.values())
         head = (f"rmbench table ({self.plan.obs}): {finished}/{len(cells)} cells evaluated, "
                 f"{len(running)} running, {len(failed)} failed")
-        width = {s: max(len(column(s)), 9) for s in specs}
+        width = {s: max(len(column(s)), 12) for s in specs}  # ("features 52%")
         lines = [head, f"{'task':<19}" + " ".join(f"{column(s):>{width[s]}}" for s in specs)]
         for task in dict.fromkeys(t for t, _ in cells):
             lines.append(f"{task:<19}" + " ".join(f"{grid.get((task, s), ''):>{width[s]}}"

@@ -133,6 +133,31 @@ def feature_caches(plan: Plan, out: Path, task: str) -> list[tuple[Any, tuple[li
             for key, cams in cameras.items()]
 
 
+def data_progress(plan: Plan, out: Path, task: str) -> tuple[str, float]:
+    """The part of the task's data under way (``demos``, rendered ``copies``, ``features``)
+    and how far it has come (0-1), read from what it has written so far: cheap enough for a
+    progress display, which asks it every poll."""
+    from rmbench.policies.feature_cache import cached_episodes, default_dir
+
+    made = read_json(plan.data_dir(out, task) / "meta" / "info.json", {})
+    demos = min(1.0, made.get("total_episodes", 0) / plan.demos)
+    if demos < 1:
+        return "demos", demos
+    data = plan.train_data_dir(out, task)
+    if plan.rendered_copies and copies_done(plan, out, task) is None:
+        copies = read_json(data / "meta" / "info.json", {}).get("total_episodes", 0)
+        return "copies", min(1.0, copies / (plan.demos * (plan.rendered_copies + 1)))
+    episodes = read_json(data / "meta" / "info.json", {}).get("total_episodes", 0)
+    wanted = done = 0
+    for spec in {trained_spec(s) for s in plan.policies}:
+        c = plan.config(task, spec)
+        if c.reads_features:
+            folder = default_dir(data, c.backbone, c.backbone_stride, tuple(c.image_size))
+            wanted += episodes * len(c.cameras)
+            done += sum(min(episodes, cached_episodes(folder / cam)) for cam in c.cameras)
+    return ("features", done / wanted) if wanted and done < wanted else ("data", demos)
+
+
 def trained(plan: Plan, out: Path, task: str, spec: str) -> bool:
     """Whether the cell's training is done: its checkpoint of the plan's steps, and the
     stage's clock, which ``train_stage`` writes last (a training stopped between its
@@ -154,11 +179,10 @@ def evaluated(plan: Plan, out: Path, task: str, spec: str) -> dict | None:
 
 
 def fraction(plan: Plan, out: Path, kind: str, task: str, spec: str = "") -> float:
-    """How far a stage has come (0-1), read from what it has written so far."""
+    """How far a stage has come (0-1), read from what it has written so far (a collection's:
+    its part under way, ``data_progress``)."""
     if kind == "collect":
-        root = plan.data_dir(out, task)
-        info = read_json(root / "meta" / "info.json", {})
-        return min(1.0, info.get("total_episodes", 0) / plan.demos)
+        return data_progress(plan, out, task)[1]
     if kind == "train":
         curve = plan.train_dir(out, task, spec) / CURVE_CSV
         try:
