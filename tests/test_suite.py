@@ -404,6 +404,28 @@ def test_progress_in_a_log_shows_a_training_between_its_start_and_end(tmp_path):
     assert quiet.getvalue().count("rmbench table") == 1
 
 
+def test_a_running_job_shows_the_time_it_has_left_at_its_pace(tmp_path, monkeypatch):
+    plan = Plan("state", ("put_back_block",), ("mem0",), steps=100)
+    curve = plan.train_dir(tmp_path, "put_back_block", "mem0") / stages.CURVE_CSV
+    curve.parent.mkdir(parents=True)
+    curve.write_text("step,loss\n20,0.5\n")
+    job = runner.Job("train", "put_back_block", "mem0")
+    clock_s = [1000.0]
+    monkeypatch.setattr(runner.time, "monotonic", lambda: clock_s[0])
+    progress = runner.Progress(plan, tmp_path, stream=io.StringIO(), pace_after_s=60)
+    assert progress.running_lines({job}) == ["  train put_back_block mem0: train 20%"]
+    clock_s[0] += 30
+    curve.write_text("step,loss\n30,0.5\n")  # moved, but not for long enough to tell a pace
+    assert progress.running_lines({job}) == ["  train put_back_block mem0: train 30%"]
+    clock_s[0] += 1170  # 40% of the steps in 20 minutes: 40% more take 20
+    curve.write_text("step,loss\n60,0.5\n")
+    assert progress.running_lines({job}) == [
+        "  train put_back_block mem0: train 60%, about 0:20 left at its pace"]
+    progress.forget(job)  # restarted on more cores: its pace is measured again
+    assert progress.running_lines({job}) == ["  train put_back_block mem0: train 60%"]
+    assert progress.running_lines(set()) == [] and not progress.paces
+
+
 def test_a_camera_tables_data_shows_the_part_under_way(tmp_path):
     """A camera table's data job spends most of its hours after the demonstrations: rendering
     their copies, then caching features. The grid names the part and its progress instead of
