@@ -817,6 +817,51 @@ def test_a_table_under_nohup_keeps_sighup_ignored(tmp_path, monkeypatch):
         signal.signal(signal.SIGHUP, before)
 
 
+class _Pool:
+    """Jobs that end after a set number of polls, and what was started, stopped and ended."""
+
+    grows = True
+
+    def __init__(self, polls, events):
+        self.polls, self.events = polls, events
+        self.running, self.slots, self.left = {}, {}, {}
+
+    def held(self):
+        return sum(self.slots[j] for j in self.running)
+
+    def start(self, plan, out, job, log, slots=1):
+        self.running[job], self.slots[job], self.left[job] = None, slots, self.polls[job]
+        self.events.append(("start", job.name, slots))
+
+    def restart(self, plan, out, job, slots, logs):
+        del self.running[job]
+        self.events.append(("stop", job.name, self.slots[job]))
+        self.start(plan, out, job, logs / job.log_name, slots)
+        return True
+
+    def finished(self):
+        for job in list(self.running):
+            self.left[job] -= 1
+        ended = [j for j in self.running if self.left[j] <= 0]
+        for job in ended:
+            del self.running[job]
+            self.events.append(("end", job.name, self.slots[job]))
+        return [(job, None) for job in ended]
+
+    def stop(self):
+        self.running.clear()
+
+
+def _scheduled(tmp_path, monkeypatch, needs, polls, jobs):
+    events = []
+    monkeypatch.setattr(runner, "plan_jobs", lambda plan, out: dict(needs))
+    monkeypatch.setattr(runner, "LocalJobs", lambda threads: _Pool(polls, events))
+    plan = Plan("state", tuple(dict.fromkeys(j.task for j in needs)), ("dp",))
+    assert runner.run(plan, tmp_path, jobs=jobs, poll_s=0,
+                      progress=runner.Progress(plan, tmp_path, stream=io.StringIO())) == {}
+    return events
+
+
 def test_idle_slots_go_to_a_collection_or_an_evaluation_that_can_use_them(tmp_path, monkeypatch):
     """With two slots: a collection started alone takes both; a running one is restarted on
     the slot another job left when nothing else can start; a training keeps one slot (its
@@ -826,43 +871,7 @@ def test_idle_slots_go_to_a_collection_or_an_evaluation_that_can_use_them(tmp_pa
     train, ev = J("train", "put_back_block", "dp"), J("eval", "put_back_block", "dp")
     needs = {a: (), b: (), train: (a,), ev: (train,)}
     polls = {a: 4, b: 1, train: 2, ev: 1}  # each job's polls until it ends, once started
-    events = []
-
-    class Pool:
-        grows = True
-
-        def __init__(self, threads):
-            self.running, self.slots, self.left = {}, {}, {}
-
-        def held(self):
-            return sum(self.slots[j] for j in self.running)
-
-        def start(self, plan, out, job, log, slots=1):
-            self.running[job], self.slots[job], self.left[job] = None, slots, polls[job]
-            events.append(("start", job.name, slots))
-
-        def restart(self, plan, out, job, log, slots):
-            del self.running[job]
-            events.append(("stop", job.name, self.slots[job]))
-            self.start(plan, out, job, log, slots)
-
-        def finished(self):
-            for job in list(self.running):
-                self.left[job] -= 1
-            ended = [j for j in self.running if self.left[j] <= 0]
-            for job in ended:
-                del self.running[job]
-                events.append(("end", job.name, self.slots[job]))
-            return [(job, None) for job in ended]
-
-        def stop(self):
-            self.running.clear()
-
-    monkeypatch.setattr(runner, "plan_jobs", lambda plan, out: dict(needs))
-    monkeypatch.setattr(runner, "LocalJobs", Pool)
-    plan = Plan("state", ("put_back_block", "press_button"), ("dp",))
-    assert runner.run(plan, tmp_path, jobs=2, poll_s=0,
-                      progress=runner.Progress(plan, tmp_path, stream=io.StringIO())) == {}
+    events = _scheduled(tmp_path, monkeypatch, needs, polls, jobs=2)
     assert events == [
         ("start", "collect put_back_block", 1), ("start", "collect press_button", 1),
         ("end", "collect press_button", 1),
@@ -871,11 +880,26 @@ def test_idle_slots_go_to_a_collection_or_an_evaluation_that_can_use_them(tmp_pa
         ("start", "train put_back_block dp", 1),  # one slot idle: nothing may take it
         ("end", "train put_back_block dp", 1),
         ("start", "eval put_back_block dp", 2), ("end", "eval put_back_block dp", 2)]
-    # three slots, two jobs ready: one each, the last the third when it may grow
-    assert runner.shares([train, a], 3, grows=True) == [(train, 1), (a, 2)]
-    assert runner.shares([a, train], 3, grows=True) == [(a, 1), (train, 1)]
+    # the spare slots go to the first ready job that may have them, in the table's order
+    assert runner.shares([train, a, b], 4, grows=True) == [(train, 1), (a, 2), (b, 1)]
     assert runner.shares([a, b, train], 2, grows=True) == [(a, 1), (b, 1)]
     assert runner.shares([a], 2, grows=False) == [(a, 1)]
+
+
+def test_a_collection_on_several_slots_gives_them_back_when_jobs_wait(tmp_path, monkeypatch):
+    """Three slots, two collections: the first takes two. When the second ends, two
+    trainings are ready and one slot is free: the first collection is restarted on one slot,
+    and the second training starts on the one it gave back."""
+    J = runner.Job
+    a, b = J("collect", "put_back_block"), J("collect", "press_button")
+    t1, t2 = J("train", "press_button", "dp"), J("train", "press_button", "mem0")
+    needs = {a: (), b: (), t1: (b,), t2: (b,)}
+    events = _scheduled(tmp_path, monkeypatch, needs, {a: 5, b: 1, t1: 9, t2: 9}, jobs=3)
+    assert events[:6] == [
+        ("start", "collect put_back_block", 2), ("start", "collect press_button", 1),
+        ("end", "collect press_button", 1), ("start", "train press_button dp", 1),
+        ("stop", "collect put_back_block", 2), ("start", "collect put_back_block", 1)]
+    assert events[6] == ("start", "train press_button mem0", 1)
 
 
 def test_a_job_restarted_on_more_slots_stops_and_gets_their_threads(tmp_path, monkeypatch):
@@ -892,12 +916,19 @@ def test_a_job_restarted_on_more_slots_stops_and_gets_their_threads(tmp_path, mo
     pool = runner.LocalJobs(3)
     job = runner.Job("collect", "put_back_block")
     plan = Plan("state", ("put_back_block",), ("dp",))
-    pool.start(plan, tmp_path, job, tmp_path / "job.log")
+    pool.start(plan, tmp_path, job, tmp_path / job.log_name)
     first = pool.running[job][0]
-    pool.restart(plan, tmp_path, job, tmp_path / "job.log", 2)
+    assert pool.restart(plan, tmp_path, job, 2, tmp_path)
     try:
         assert first.poll() is not None  # stopped before its successor started
         assert started == [("3", "3"), ("6", "6")] and pool.held() == 2
     finally:
         pool.stop()
     assert pool.held() == 0
+    # a job that has ended is not started again: the next finished() reports it
+    monkeypatch.setattr(runner.subprocess, "Popen", lambda cmd, **kw: popen(
+        [sys.executable, "-c", "raise SystemExit(3)"], **kw))
+    pool.start(plan, tmp_path, job, tmp_path / job.log_name)
+    pool.running[job][0].wait()
+    assert not pool.restart(plan, tmp_path, job, 2, tmp_path)
+    assert [(j, e.split(":")[0]) for j, e in pool.finished()] == [(job, "exit 3")]

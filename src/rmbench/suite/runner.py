@@ -7,9 +7,9 @@ Each job is a fresh process (``python -m rmbench.suite.job``) with ``cores / job
 threads (a collect or evaluation job: as many worker processes) and its own log in
 ``OUT/logs``; on Ray each is a task with one CPU, and ``OUT`` must be a file system every
 node sees (the stages read and write their folders there). Locally, slots no job can take
-go to a collect or evaluation job (``GROWS``): one started with them, or one running,
-restarted with them (it resumes). A camera table's last task otherwise makes its data, for
-hours, on one slot of two. A
+go to a collection or an evaluation (``GROWS``) as it starts, or to a running collection,
+restarted with them (it resumes), which gives them back when jobs wait: a camera table's
+last task would otherwise make its data, for hours, on one slot of two. A
 job that fails is reported with its log and its dependants are skipped; the others go on.
 Interrupted (Ctrl-C, SIGTERM, a closed terminal), the running jobs stop and what they saved
 stays: a re-run of the same command plans only what is missing. One table at a time runs a task in an
@@ -41,6 +41,9 @@ PRIORITY = {"collect": 0, "eval": 1, "train": 2}  # within a task: unblock other
 # kinds whose results do not depend on their number of worker processes and that resume where
 # they stopped: idle slots may be given to them (a training's float sums depend on its threads)
 GROWS = ("collect", "eval")
+# a collection's parts that commit as they go (an episode, a copied demonstration, a camera's
+# features): a restart loses little of them (the state's layout-copy solve commits at its end)
+RESUMABLE_PARTS = ("demos", "copies", "features")
 LOCK = ".table.lock"
 STOPS = (signal.SIGTERM, signal.SIGHUP)  # stop the table as Ctrl-C does
 
@@ -125,15 +128,19 @@ class LocalJobs:
                              start)
         self.slots[job] = slots
 
-    def restart(self, plan: Plan, out: Path, job: Job, log: Path, slots: int) -> None:
-        """Stop ``job`` and start it again on ``slots`` slots: it resumes from what it saved
-        (a collection's committed episodes, an evaluation's finished ones), losing what its
-        workers had in hand."""
-        proc, f, _ = self.running.pop(job)
+    def restart(self, plan: Plan, out: Path, job: Job, slots: int, logs: Path) -> bool:
+        """Stop ``job`` and start it again on ``slots`` slots: it resumes from what it saved,
+        losing what its workers had in hand. False, and nothing done, if it has ended (the
+        next ``finished`` reports it)."""
+        proc, f, _ = self.running[job]
+        if proc.poll() is not None:
+            return False
         proc.terminate()
         proc.wait()
         f.close()
-        self.start(plan, out, job, log, slots)
+        del self.running[job]
+        self.start(plan, out, job, logs / job.log_name, slots)
+        return True
 
     def finished(self) -> list[tuple[Job, str | None]]:
         """Jobs that ended since the last call, each with None or its error in one line (the
@@ -361,6 +368,13 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
             try:
                 progress.show(set(pool.running), failed, f"{len(needs)} jobs to run")
                 while pending or pool.running:
+                    for job, error in pool.finished():
+                        if error is None:
+                            done.add(job)
+                        else:
+                            failed[job] = f"{error} (log {logs / job.log_name})"
+                        progress.show(set(pool.running), failed,
+                                      f"{'done' if error is None else 'FAILED'} {job.name}")
                     for job in list(pending):
                         if any(d in failed for d in needs[job]):  # its input failed: skipped
                             pending.remove(job)
@@ -372,21 +386,16 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
                         pool.start(plan, out, job, logs / job.log_name, slots)
                         progress.show(set(pool.running), failed, f"started {job.name}"
                                       + (f" on {slots} slots" if slots > 1 else ""))
-                    grown = grow(pool, jobs, [j for j in ready if j in pending])
-                    if grown is not None:
-                        pool.restart(plan, out, grown, logs / grown.log_name,
-                                     pool.slots[grown] + jobs - pool.held())
-                        progress.forget(grown)
-                        progress.show(set(pool.running), failed,
-                                      f"restarted {grown.name} on {pool.slots[grown]} slots: "
-                                      f"no other job can start")
-                    for job, error in pool.finished():
-                        if error is None:
-                            done.add(job)
-                        else:
-                            failed[job] = f"{error} (log {logs / job.log_name})"
-                        progress.show(set(pool.running), failed,
-                                      f"{'done' if error is None else 'FAILED'} {job.name}")
+                    move = resize(pool, jobs, [j for j in ready if j in pending],
+                                  lambda j: stages.data_progress(plan, out, j.task)[0])
+                    if move is not None:
+                        job, slots = move
+                        why = ("no other job can start" if slots > pool.slots[job]
+                               else "jobs wait for its slots")
+                        if pool.restart(plan, out, job, slots, logs):
+                            progress.forget(job)
+                            progress.show(set(pool.running), failed,
+                                          f"restarted {job.name} on {slots} slots: {why}")
                     if pending or pool.running:
                         time.sleep(poll_s)
                         progress.show(set(pool.running), failed)
@@ -405,21 +414,33 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
 
 def shares(ready: list[Job], free: int, grows: bool) -> list[tuple[Job, int]]:
     """The ``ready`` jobs that start on the ``free`` slots, each with its slots: one each, and
-    the last of them the rest when its kind is in ``GROWS``."""
+    the first of them whose kind is in ``GROWS`` the rest."""
     started = [[job, 1] for job in ready[:max(0, free)]]
-    if started and grows and started[-1][0].kind in GROWS:
-        started[-1][1] += free - len(started)
+    wide = next((s for s in started if s[0].kind in GROWS), None) if grows else None
+    if wide is not None:
+        wide[1] += free - len(started)
     return [(job, slots) for job, slots in started]
 
 
-def grow(pool, jobs: int, waiting: list[Job]) -> Job | None:
-    """The running job to restart on the slots left idle when no job is ready to take them
-    (``waiting``: the ready ones not started): the ``GROWS`` one on the fewest slots (the
-    first started among equals), or None."""
-    if not pool.grows or waiting or pool.held() >= jobs:
+def resize(pool, jobs: int, waiting: list[Job], part) -> tuple[Job, int] | None:
+    """A running collection to restart on other slots, with how many, or None: on the idle
+    slots when no job is ready to take them (``waiting``: the ready ones not started), the
+    one on the fewest; on fewer, giving one back per waiting job, when jobs wait and one
+    holds several. Only a collection in a part that commits as it goes (``part(job)`` one of
+    ``RESUMABLE_PARTS``) moves: an evaluation commits chunks of seeds, and a restart would
+    lose the one in hand."""
+    if not pool.grows:
         return None
-    growable = [j for j in pool.running if j.kind in GROWS]
-    return min(growable, key=lambda j: pool.slots[j], default=None)
+    movable = [j for j in pool.running if j.kind == "collect" and part(j) in RESUMABLE_PARTS]
+    free = jobs - pool.held()
+    if not waiting and free > 0 and movable:
+        job = min(movable, key=lambda j: pool.slots[j])
+        return job, pool.slots[job] + free
+    wide = [j for j in movable if pool.slots[j] > 1]
+    if waiting and wide:
+        job = max(wide, key=lambda j: pool.slots[j])
+        return job, max(1, pool.slots[job] - len(waiting))
+    return None
 
 
 @contextlib.contextmanager
