@@ -146,6 +146,7 @@ def data_progress(plan: Plan, out: Path, task: str) -> tuple[str, float]:
     data = plan.train_data_dir(out, task)
     if plan.rendered_copies and copies_done(plan, out, task) is None:
         copies = read_json(data / "meta" / "info.json", {}).get("total_episodes", 0)
+        # (a copy out of the arms' reach is left out: this part may end short of 100%)
         return "copies", min(1.0, copies / (plan.demos * (plan.rendered_copies + 1)))
     episodes = read_json(data / "meta" / "info.json", {}).get("total_episodes", 0)
     wanted = done = 0
