@@ -14,7 +14,7 @@ from rmbench.cli.main import main as cli
 from rmbench.eval.chance import chance
 from rmbench.machine import describe, short
 from rmbench.policies.mem0.config import Mem0Config
-from rmbench.suite import clock, runner, stages, tables
+from rmbench.suite import backends, clock, runner, schedule, stages, tables
 from rmbench.suite.plan import (
     Plan,
     applies,
@@ -27,6 +27,7 @@ from rmbench.suite.plan import (
     run_name,
     trained_spec,
 )
+from rmbench.suite.progress import Progress, column
 from rmbench.suite.recipes import GENERIC, RECIPES, add_recipe_arguments, recipe_of
 from rmbench.tasks import TASKS, get_task
 from rmbench.tasks.registry import UnknownTaskError
@@ -212,8 +213,8 @@ def test_run_names_and_memory_in_words():
 
 def test_jobs_wait_for_what_they_read(tmp_path):
     plan = Plan("state", ("press_button",), ("mem0", "mem0:gt_classifier", "dp"))
-    needs = runner.plan_jobs(plan, tmp_path)
-    J = runner.Job
+    needs = schedule.plan_jobs(plan, tmp_path)
+    J = schedule.Job
     collect, train = J("collect", "press_button"), J("train", "press_button", "mem0")
     assert needs[collect] == () and needs[train] == (collect,)
     # the classifier ablation evaluates Mem-0's checkpoint: one training job for both
@@ -221,7 +222,7 @@ def test_jobs_wait_for_what_they_read(tmp_path):
     assert sorted(j.kind for j in needs) == ["collect", "eval", "eval", "eval", "train", "train"]
     # no_key takes Mem-0's executor (of its own training seed): that training first, even when
     # the table does not ask for Mem-0's column
-    needs = runner.plan_jobs(Plan("state", ("press_button",), ("mem0:no_key@1",)), tmp_path)
+    needs = schedule.plan_jobs(Plan("state", ("press_button",), ("mem0:no_key@1",)), tmp_path)
     mem0, no_key = J("train", "press_button", "mem0@1"), J("train", "press_button", "mem0:no_key@1")
     assert needs[mem0] == (collect,) and needs[no_key] == (collect, mem0)
     assert executor_spec("mem0:no_key@1") == "mem0@1" and executor_spec("mem0:no_anchor") is None
@@ -247,9 +248,9 @@ def test_a_stage_s_clock_is_kept_while_it_runs(tmp_path):
 
 
 def test_a_task_s_cells_start_before_the_next_task_s_data():
-    J = runner.Job
+    J = schedule.Job
     plan = Plan("pixels", ("put_back_block", "press_button"), ("mem0", "mem0:no_memory"))
-    order = runner.start_order(runner.plan_jobs(plan, Path("/nonexistent")))
+    order = schedule.start_order(schedule.plan_jobs(plan, Path("/nonexistent")))
     assert order[0] == J("collect", "put_back_block")
     kinds = [(j.task, j.kind) for j in order]
     assert kinds.index(("put_back_block", "train")) < kinds.index(("press_button", "collect"))
@@ -288,7 +289,7 @@ def test_toy_table_end_to_end_and_resumed(toy_table, capsys):
     checkpoint = out / "observe_and_pickup" / "train" / "mem0-s6-b4" / "model.safetensors"
     mtime = checkpoint.stat().st_mtime_ns
     plan = Plan.from_dict(res["plan"])
-    assert runner.plan_jobs(plan, out) == {}
+    assert schedule.plan_jobs(plan, out) == {}
     assert cli(args) == 0
     assert checkpoint.stat().st_mtime_ns == mtime
     assert "0 jobs to run" in capsys.readouterr().err
@@ -386,9 +387,9 @@ def test_progress_in_a_log_shows_a_training_between_its_start_and_end(tmp_path):
     plan = Plan("state", ("put_back_block",), ("mem0",), steps=100)
     curve = plan.train_dir(tmp_path, "put_back_block", "mem0") / stages.CURVE_CSV
     curve.parent.mkdir(parents=True)
-    running = {runner.Job("train", "put_back_block", "mem0")}
+    running = {schedule.Job("train", "put_back_block", "mem0")}
     log = io.StringIO()
-    progress = runner.Progress(plan, tmp_path, stream=log, every_s=0.0)
+    progress = Progress(plan, tmp_path, stream=log, every_s=0.0)
     progress.show(running, {}, "started train put_back_block mem0")
     assert "started train" in log.getvalue() and "train 0%" in log.getvalue()
     progress.show(running, {})  # nothing changed: nothing printed
@@ -397,7 +398,7 @@ def test_progress_in_a_log_shows_a_training_between_its_start_and_end(tmp_path):
     progress.show(running, {})
     assert log.getvalue().count("rmbench table") == 2 and "train 40%" in log.getvalue()
     quiet = io.StringIO()
-    progress = runner.Progress(plan, tmp_path, stream=quiet, every_s=3600.0)
+    progress = Progress(plan, tmp_path, stream=quiet, every_s=3600.0)
     progress.show(running, {}, "started")
     curve.write_text("step,loss\n80,0.5\n")
     progress.show(running, {})  # changed, but within every_s of the last print
@@ -409,10 +410,10 @@ def test_a_running_job_shows_the_time_it_has_left_at_its_pace(tmp_path, monkeypa
     curve = plan.train_dir(tmp_path, "put_back_block", "mem0") / stages.CURVE_CSV
     curve.parent.mkdir(parents=True)
     curve.write_text("step,loss\n20,0.5\n")
-    job = runner.Job("train", "put_back_block", "mem0")
+    job = schedule.Job("train", "put_back_block", "mem0")
     clock_s = [1000.0]
     monkeypatch.setattr(runner.time, "monotonic", lambda: clock_s[0])
-    progress = runner.Progress(plan, tmp_path, stream=io.StringIO(), pace_after_s=60)
+    progress = Progress(plan, tmp_path, stream=io.StringIO(), pace_after_s=60)
     assert progress.running_lines({job}) == ["  train put_back_block mem0: train 20%"]
     clock_s[0] += 30
     curve.write_text("step,loss\n30,0.5\n")  # moved, but not for long enough to tell a pace
@@ -434,8 +435,8 @@ def test_a_camera_tables_data_shows_the_part_under_way(tmp_path):
 
     plan = Plan("pixels", ("put_back_block",), ("mem0", "mem0:no_memory"), demos=4,
                 rendered_copies=2, sets=('backbone="efficientnet_lite0"',))
-    running = {runner.Job("collect", "put_back_block")}
-    show = lambda: runner.Progress(plan, tmp_path).cell("put_back_block", "mem0", running, {})  # noqa: E731
+    running = {schedule.Job("collect", "put_back_block")}
+    show = lambda: Progress(plan, tmp_path).cell("put_back_block", "mem0", running, {})  # noqa: E731
     data, copies = plan.data_dir(tmp_path, "put_back_block"), plan.train_data_dir(tmp_path, "put_back_block")
 
     def episodes(root, n):
@@ -492,11 +493,11 @@ def test_the_collect_job_solves_the_layout_copies_the_trainings_read(dataset, tm
     assert stages.layout_copy_sets(plan, TASK) == [(2, 0.02)]  # one set for both policies
     shutil.copytree(dataset, plan.data_dir(tmp_path, TASK), ignore=shutil.ignore_patterns(".cache"))
     assert stages.demos_collected(plan, tmp_path, TASK) and not stages.collected(plan, tmp_path, TASK)
-    assert runner.Job("collect", TASK) in runner.plan_jobs(plan, tmp_path)
+    assert schedule.Job("collect", TASK) in schedule.plan_jobs(plan, tmp_path)
     summary = stages.collect_stage(plan, tmp_path, TASK)
     assert summary["layout_copies_wall_s"] > 0
     assert stages.collected(plan, tmp_path, TASK)
-    assert runner.Job("collect", TASK) not in runner.plan_jobs(plan, tmp_path)
+    assert schedule.Job("collect", TASK) not in schedule.plan_jobs(plan, tmp_path)
     # solved once: a second collect job finds them and adds no time
     assert stages.collect_stage(plan, tmp_path, TASK)["layout_copies_wall_s"] == summary[
         "layout_copies_wall_s"]
@@ -520,14 +521,14 @@ def test_rendered_copies_are_the_training_data_with_their_features_encoded_once(
     assert plain.train_data_dir(tmp_path, TASK) == plan.data_dir(tmp_path, TASK)
     assert plan.train_dir(tmp_path, TASK, "mem0") != plain.train_dir(tmp_path, TASK, "mem0")
     assert plan.eval_dir(tmp_path, TASK, "mem0") != plain.eval_dir(tmp_path, TASK, "mem0")
-    assert runner.Job("collect", TASK) in runner.plan_jobs(plan, tmp_path)
+    assert schedule.Job("collect", TASK) in schedule.plan_jobs(plan, tmp_path)
 
     summary = stages.collect_stage(plan, tmp_path, TASK)
     assert summary["episodes"] == 1 and summary["rendered_copies"]["episodes"] == 2
     (cache, wanted), = stages.feature_caches(plan, tmp_path, TASK)
     assert wanted == ([0, 1], sorted(cams)) and cache.missing(*wanted) == []
     assert stages.collected(plan, tmp_path, TASK)
-    assert runner.Job("collect", TASK) not in runner.plan_jobs(plan, tmp_path)
+    assert schedule.Job("collect", TASK) not in schedule.plan_jobs(plan, tmp_path)
     encoded = {p: p.stat().st_mtime_ns for p in cache.dir.rglob("*.npy")}
     assert len(encoded) == 6
     ckpt = stages.train_stage(plan, tmp_path, TASK, "mem0")
@@ -654,9 +655,9 @@ def test_training_seeds_are_columns_of_their_own_folders_pooled_into_one_cell(ca
     assert plan.train_dir(out, task, "mem0@1") != plan.train_dir(out, task, "mem0")
     assert trained_spec("mem0:gt_classifier@1") == "mem0@1"
     assert plan.train_dir(out, task, "mem0:gt_classifier@1") == plan.train_dir(out, task, "mem0@1")
-    assert runner.column("mem0:no_key@1") == "no_key@1"
-    J = runner.Job
-    needs = runner.plan_jobs(plan, Path("/nonexistent"))
+    assert column("mem0:no_key@1") == "no_key@1"
+    J = schedule.Job
+    needs = schedule.plan_jobs(plan, Path("/nonexistent"))
     assert needs[J("eval", task, "mem0:gt_classifier@1")] == (J("train", task, "mem0@1"),)
     # one cell per column: the seeds' episodes pooled, each seed's row kept
     row = lambda k, p: {"success_rate": k / 100, "successes": k, "episodes": 100,  # noqa: E731
@@ -755,10 +756,10 @@ def test_a_failed_job_reports_the_last_line_of_its_own_run(tmp_path, monkeypatch
     log = tmp_path / "job.log"
     log.write_text("RuntimeError: the error of an earlier run\n")
     popen = subprocess.Popen
-    monkeypatch.setattr(runner.subprocess, "Popen", lambda cmd, **kw: popen(
+    monkeypatch.setattr(backends.subprocess, "Popen", lambda cmd, **kw: popen(
         [sys.executable, "-c", "raise SystemExit(9)"], **kw))
-    pool = runner.LocalJobs(1)
-    job = runner.Job("collect", "put_back_block")
+    pool = backends.LocalJobs(1)
+    job = schedule.Job("collect", "put_back_block")
     pool.start(Plan("state", ("put_back_block",), ("dp",)), tmp_path, job, log)
     deadline = time.monotonic() + 30
     while not (ended := pool.finished()):
@@ -858,7 +859,7 @@ def _scheduled(tmp_path, monkeypatch, needs, polls, jobs):
     monkeypatch.setattr(runner, "LocalJobs", lambda threads: _Pool(polls, events))
     plan = Plan("state", tuple(dict.fromkeys(j.task for j in needs)), ("dp",))
     assert runner.run(plan, tmp_path, jobs=jobs, poll_s=0,
-                      progress=runner.Progress(plan, tmp_path, stream=io.StringIO())) == {}
+                      progress=Progress(plan, tmp_path, stream=io.StringIO())) == {}
     return events
 
 
@@ -866,7 +867,7 @@ def test_idle_slots_go_to_a_collection_or_an_evaluation_that_can_use_them(tmp_pa
     """With two slots: a collection started alone takes both; a running one is restarted on
     the slot another job left when nothing else can start; a training keeps one slot (its
     float sums depend on its threads) and leaves the other idle."""
-    J = runner.Job
+    J = schedule.Job
     a, b = J("collect", "put_back_block"), J("collect", "press_button")
     train, ev = J("train", "put_back_block", "dp"), J("eval", "put_back_block", "dp")
     needs = {a: (), b: (), train: (a,), ev: (train,)}
@@ -881,16 +882,16 @@ def test_idle_slots_go_to_a_collection_or_an_evaluation_that_can_use_them(tmp_pa
         ("end", "train put_back_block dp", 1),
         ("start", "eval put_back_block dp", 2), ("end", "eval put_back_block dp", 2)]
     # the spare slots go to the first ready job that may have them, in the table's order
-    assert runner.shares([train, a, b], 4, grows=True) == [(train, 1), (a, 2), (b, 1)]
-    assert runner.shares([a, b, train], 2, grows=True) == [(a, 1), (b, 1)]
-    assert runner.shares([a], 2, grows=False) == [(a, 1)]
+    assert schedule.shares([train, a, b], 4, grows=True) == [(train, 1), (a, 2), (b, 1)]
+    assert schedule.shares([a, b, train], 2, grows=True) == [(a, 1), (b, 1)]
+    assert schedule.shares([a], 2, grows=False) == [(a, 1)]
 
 
 def test_a_collection_on_several_slots_gives_them_back_when_jobs_wait(tmp_path, monkeypatch):
     """Three slots, two collections: the first takes two. When the second ends, two
     trainings are ready and one slot is free: the first collection is restarted on one slot,
     and the second training starts on the one it gave back."""
-    J = runner.Job
+    J = schedule.Job
     a, b = J("collect", "put_back_block"), J("collect", "press_button")
     t1, t2 = J("train", "press_button", "dp"), J("train", "press_button", "mem0")
     needs = {a: (), b: (), t1: (b,), t2: (b,)}
@@ -912,9 +913,9 @@ def test_a_job_restarted_on_more_slots_stops_and_gets_their_threads(tmp_path, mo
         started.append((cmd[cmd.index("--threads") + 1], kw["env"]["OMP_NUM_THREADS"]))
         return popen([sys.executable, "-c", "import time; time.sleep(60)"], **kw)
 
-    monkeypatch.setattr(runner.subprocess, "Popen", fake)
-    pool = runner.LocalJobs(3)
-    job = runner.Job("collect", "put_back_block")
+    monkeypatch.setattr(backends.subprocess, "Popen", fake)
+    pool = backends.LocalJobs(3)
+    job = schedule.Job("collect", "put_back_block")
     plan = Plan("state", ("put_back_block",), ("dp",))
     pool.start(plan, tmp_path, job, tmp_path / job.log_name)
     first = pool.running[job][0]
@@ -926,7 +927,7 @@ def test_a_job_restarted_on_more_slots_stops_and_gets_their_threads(tmp_path, mo
         pool.stop()
     assert pool.held() == 0
     # a job that has ended is not started again: the next finished() reports it
-    monkeypatch.setattr(runner.subprocess, "Popen", lambda cmd, **kw: popen(
+    monkeypatch.setattr(backends.subprocess, "Popen", lambda cmd, **kw: popen(
         [sys.executable, "-c", "raise SystemExit(3)"], **kw))
     pool.start(plan, tmp_path, job, tmp_path / job.log_name)
     pool.running[job][0].wait()

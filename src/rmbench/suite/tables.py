@@ -22,7 +22,7 @@ from rmbench.files import write_atomic, write_json
 from rmbench.machine import describe, short
 from rmbench.suite.clock import DATA_WALLS, TIMING, read_json
 from rmbench.suite.plan import Plan, applies, split_seed
-from rmbench.suite.runner import column
+from rmbench.suite.progress import column
 from rmbench.suite.stages import cell_row, pooled_row
 from rmbench.tasks import get_task
 
