@@ -413,7 +413,8 @@ def test_a_running_job_shows_the_time_it_has_left_at_its_pace(tmp_path, monkeypa
     job = schedule.Job("train", "put_back_block", "mem0")
     clock_s = [1000.0]
     monkeypatch.setattr(runner.time, "monotonic", lambda: clock_s[0])
-    progress = Progress(plan, tmp_path, stream=io.StringIO(), pace_after_s=60)
+    progress = Progress(plan, tmp_path, stream=io.StringIO(), pace_after_s=60,
+                        pace_window_s=1200)
     assert progress.running_lines({job}) == ["  train put_back_block mem0: train 20%"]
     clock_s[0] += 30
     curve.write_text("step,loss\n30,0.5\n")  # moved, but not for long enough to tell a pace
@@ -422,8 +423,16 @@ def test_a_running_job_shows_the_time_it_has_left_at_its_pace(tmp_path, monkeypa
     curve.write_text("step,loss\n60,0.5\n")
     assert progress.running_lines({job}) == [
         "  train put_back_block mem0: train 60%, about 0:20 left at its pace"]
+    clock_s[0] += 3000  # paused: 1% in 50 minutes
+    curve.write_text("step,loss\n61,0.5\n")
+    assert progress.running_lines({job})[0].endswith("about 32:29 left at its pace")
+    for step in (71, 80):  # moving again: the pause leaves the 20-minute window
+        clock_s[0] += 600
+        curve.write_text(f"step,loss\n{step},0.5\n")
+        line = progress.running_lines({job})[0]
+    assert line.endswith("train 80%, about 0:21 left at its pace")  # 19% in 20 minutes
     progress.forget(job)  # restarted on more cores: its pace is measured again
-    assert progress.running_lines({job}) == ["  train put_back_block mem0: train 60%"]
+    assert progress.running_lines({job}) == ["  train put_back_block mem0: train 80%"]
     assert progress.running_lines(set()) == [] and not progress.paces
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections import deque
 from pathlib import Path
 from typing import TextIO
 
@@ -28,14 +29,17 @@ class Progress:
     that an hour-long training shows its progress in the log without a line per poll."""
 
     def __init__(self, plan: Plan, out: Path, stream: TextIO | None = None,
-                 every_s: float = 300.0, pace_after_s: float = 60.0):
+                 every_s: float = 300.0, pace_after_s: float = 60.0,
+                 pace_window_s: float = 1200.0):
         self.plan, self.out = plan, out
         self.stream = stream if stream is not None else sys.stderr
         self.tty = self.stream.isatty()
         self.every_s, self.pace_after_s = every_s, pace_after_s
+        self.pace_window_s = pace_window_s
         self.start = self.printed = time.monotonic()
         self.last = ""  # the last grid shown, without its clock
-        self.paces: dict[Job, tuple[str, float, float]] = {}  # (part, time, fraction) first seen
+        # each running job's part and the (time, fraction) it was seen at as it moved
+        self.paces: dict[Job, tuple[str, deque[tuple[float, float]]]] = {}
 
     def job_progress(self, job: Job) -> tuple[str, float]:
         """A running job's part under way (a collection's: demos, copies or features) and how
@@ -45,14 +49,20 @@ class Progress:
         return job.kind, stages.fraction(self.plan, self.out, job.kind, job.task, job.spec)
 
     def left_s(self, job: Job, part: str, done: float) -> float | None:
-        """Seconds ``job`` has left of ``part`` at its pace since this display first saw it
-        there (or since ``forget``); None until it has run ``pace_after_s`` and moved."""
+        """Seconds ``job`` has left of ``part`` at its pace over the last ``pace_window_s``
+        (a pause, or other work beside it, fades out of the estimate); None until this
+        display has seen it there (since ``forget``) for ``pace_after_s`` and moving."""
         now = time.monotonic()
         seen = self.paces.get(job)
-        if seen is None or seen[0] != part or done < seen[2]:
-            self.paces[job] = (part, now, done)
+        if seen is None or seen[0] != part or done < seen[1][-1][1]:
+            self.paces[job] = (part, deque([(now, done)]))
             return None
-        _, t0, f0 = seen
+        samples = seen[1]
+        if done > samples[-1][1]:
+            samples.append((now, done))
+        while len(samples) > 2 and now - samples[1][0] >= self.pace_window_s:
+            samples.popleft()  # (the oldest kept is the last one older than the window)
+        t0, f0 = samples[0]
         if now - t0 < self.pace_after_s or done <= f0:
             return None
         return (now - t0) / (done - f0) * (1 - done)
