@@ -119,13 +119,110 @@ def test_openpi_adapter_sends_the_aloha_layout(openpi_server, tmp_path):
     assert summary["tasks"][TASK]["episodes"] == 1
 
 
-def test_openpi_server_error_is_a_policy_error(openpi_server, tmp_path):
+def test_openpi_server_error_is_a_policy_error_of_that_episode_alone(openpi_server, tmp_path):
+    """openpi's server sends its error as text and closes: that episode ends as policy_error,
+    and the next one connects again instead of failing on the closed connection."""
+    from rmbench.serve.client import open_remote
+
+    policy = open_remote(f"ws://127.0.0.1:{openpi_server.port}")
+    obs = {"agent_pos": np.zeros(14), "pixels": {cam: np.zeros((8, 8, 3), np.uint8) for cam in
+                                                 ("head", "left_wrist", "right_wrist")}}
+    try:
+        openpi_server.fail = True
+        policy.reset("pick", {})
+        with pytest.raises(RuntimeError, match="model exploded"):
+            policy.act(obs)
+        openpi_server.fail = False
+        policy.reset("pick", {})
+        assert policy.act(obs).shape == (50, 14)
+    finally:
+        policy.close()
     openpi_server.fail = True
     evaluate(EvalConfig((TASK,), f"remote:ws://127.0.0.1:{openpi_server.port}", tmp_path / "pi",
                         episodes=1, video="none", progress=False, seed_cache=tmp_path / "s"))
     (record,) = read_records(tmp_path / "pi" / TASK / "episodes.jsonl")
     assert record["reason"] == "policy_error"
     assert "model exploded" in record["message"]
+
+
+def test_a_server_gone_stops_the_evaluation_and_a_rerun_resumes(server, tmp_path, monkeypatch):
+    """A server that cannot be reached at an episode's reset says nothing about the episode:
+    the evaluation stops there in one line (instead of recording every remaining seed as a
+    policy error), and run again once the server is back it plays what is missing."""
+    import rmbench.eval.episode as episode
+    import rmbench.serve.client as client
+    from rmbench.policies.base import PolicyUnavailable
+
+    cfg = EvalConfig((TASK,), f"remote:ws://127.0.0.1:{server.port}", tmp_path / "e",
+                     episodes=3, video="none", progress=False, seed_cache=tmp_path / "s")
+    real_reset, real_connect, resets, down = episode._Episode.reset_policy, client.connect, [], []
+
+    def reset(self, policy, slot):  # the server goes down before the second episode
+        remote = getattr(policy, "policy", policy)
+        if isinstance(remote, client.RemotePolicy):  # (not the seed search's expert)
+            resets.append(self.seed)
+            if len(resets) == 2:
+                down.append(True)
+                remote.ws.close()
+        real_reset(self, policy, slot)
+
+    def connect(*args, **kwargs):
+        if down:
+            raise ConnectionRefusedError(111, "Connection refused")
+        return real_connect(*args, **kwargs)
+
+    monkeypatch.setattr(episode._Episode, "reset_policy", reset)
+    monkeypatch.setattr(client, "connect", connect)
+    with pytest.raises(PolicyUnavailable, match=f"127.0.0.1:{server.port}: Connection refused"):
+        evaluate(cfg)
+    kept = read_records(tmp_path / "e" / TASK / "episodes.jsonl")
+    assert len(kept) == 1 and kept[0]["reason"] != "policy_error"
+    down.clear()  # back up: the same command plays the two missing seeds
+    summary = evaluate(cfg)
+    records = read_records(tmp_path / "e" / TASK / "episodes.jsonl")
+    assert summary["tasks"][TASK]["episodes"] == 3 and len(records) == 3
+    assert not any(r["reason"] == "policy_error" for r in records)
+
+
+def test_something_else_at_the_address_is_a_one_line_error():
+    """A port where no websocket server answers (here a banner and a close) is the address
+    said with what went wrong, not a traceback."""
+    import socket
+    import threading
+
+    from rmbench.policies.base import PolicyUnavailable
+    from rmbench.serve.client import open_remote
+
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen()
+
+    def banner():
+        conn, _ = listener.accept()
+        conn.sendall(b"SSH-2.0-OpenSSH_9.2\r\n")
+        conn.close()
+
+    threading.Thread(target=banner, daemon=True).start()
+    port = listener.getsockname()[1]
+    try:
+        with pytest.raises(PolicyUnavailable, match=f"127.0.0.1:{port} is not a websocket server"):
+            open_remote(f"ws://127.0.0.1:{port}", timeout=10)
+    finally:
+        listener.close()
+
+
+def test_a_reset_is_checked_like_an_observation(server):
+    with connect(f"ws://127.0.0.1:{server.port}") as ws:
+        unpack(ws.recv(timeout=10))
+        from rmbench.tasks import get_task
+        for bad, said in (({"reset": True, "bogus": 3}, "unexpected entries ['bogus']"),
+                          ({"reset": True, "task_info": []}, "task_info must be a map"),
+                          ({"reset": True, "task_info": {"gym_id": "rmbench/Other-v0"}},
+                           f"serves {get_task(TASK).gym_id}, not rmbench/Other-v0")):
+            ws.send(pack(bad))
+            assert said in unpack(ws.recv(timeout=10))["error"]
+        ws.send(pack({"reset": True, "task_info": {"gym_id": get_task(TASK).gym_id}}))
+        assert unpack(ws.recv(timeout=10)) == {"ok": True}
 
 
 def test_remote_arguments_are_checked():

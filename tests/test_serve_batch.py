@@ -291,3 +291,24 @@ def test_batched_remote_evaluation_equals_the_local_policy(batch_server, tmp_pat
     assert any(e[1] == "policy" for e in there[0]["events"])  # the status came over the wire
     for a, b in zip(here, there, strict=True):  # the server names the policy's error
         assert b["message"].endswith(a["message"]), (a["message"], b["message"])
+
+
+def test_a_batch_beyond_the_servers_slots_stops_before_any_episode(tmp_path):
+    """--batch above the slots a server announced is a one-line error before the first
+    episode (not a folder of failed ones); the same folder then takes the right --batch.
+    One connection at a time is enough for a batched evaluation: the worker asks the
+    server what its policy reads once, not once per env."""
+    server = PolicyServer("counter_batch_test", TASK, port=0, max_slots=2,
+                          max_connections=1).start()
+    common = {"episodes": 2, "video": "none", "progress": False, "seed_cache": tmp_path / "s"}
+    try:
+        with pytest.raises(ValueError, match="plays at most 2 episodes at once; evaluate it "
+                                             "with --batch 2 or fewer"):
+            evaluate(EvalConfig((TASK,), f"remote:{url(server)}", tmp_path / "e", batch=4,
+                                **common))
+        assert not read_records(tmp_path / "e" / TASK / "episodes.jsonl")
+        summary = evaluate(EvalConfig((TASK,), f"remote:{url(server)}", tmp_path / "e", batch=2,
+                                      **common))
+    finally:
+        server.stop()
+    assert summary["tasks"][TASK]["episodes"] == 2

@@ -25,6 +25,7 @@ import numpy as np
 
 from rmbench.eval.events import Events
 from rmbench.eval.probe import MemoryReset
+from rmbench.policies.base import PolicyUnavailable
 from rmbench.sim.simulator import ACTION_DIM
 from rmbench.video import PREVIEW_CODEC, Mp4Encoder
 
@@ -97,6 +98,8 @@ class _Episode:
     def reset_policy(self, policy, slot: int) -> None:
         try:
             policy.reset_batch(slot, self.task_info["instruction"], self.task_info, self.env)
+        except PolicyUnavailable:
+            raise  # (nothing about this episode: it is played again when the run resumes)
         except Exception as err:
             self.fail(f"reset: {type(err).__name__}: {err}")
 
@@ -206,6 +209,8 @@ def run_policy_episodes(envs: Sequence, policy, seeds: Sequence[int],
                 answers = list(policy.act_batch(ask))
                 if len(answers) != len(ask):
                     raise ValueError(f"act_batch answered {len(answers)} of {len(ask)} slots")
+            except PolicyUnavailable:
+                raise
             except Exception as err:
                 answers = [err] * len(ask)
             for slot, (obs, out) in enumerate(zip(ask, answers, strict=True)):

@@ -24,11 +24,13 @@ def _setup(task: str, policy: str, instructions: str, envs: int = 1) -> tuple[li
     key = (task, policy, instructions)
     if _WORKER.get("key") != key:
         close_worker()
-        # the observation the policy reads (a state checkpoint: environment_state_agent_pos)
-        env = make(task, instructions=instructions, **env_options(policy))
-        _WORKER.update(key=key, envs=[env], policy=make_policy(policy, env))
+        # the observation the policy reads (a state checkpoint: environment_state_agent_pos),
+        # asked once: a remote policy's answer costs a connection to its server
+        options = env_options(policy)
+        env = make(task, instructions=instructions, **options)
+        _WORKER.update(key=key, envs=[env], policy=make_policy(policy, env), options=options)
     while len(_WORKER["envs"]) < envs:
-        _WORKER["envs"].append(make(task, instructions=instructions, **env_options(policy)))
+        _WORKER["envs"].append(make(task, instructions=instructions, **_WORKER["options"]))
     return _WORKER["envs"], _WORKER["policy"]
 
 
@@ -47,6 +49,10 @@ def episodes_job(task: str, policy: str, instructions: str, seeds: list[int],
     the seeds were split."""
     _, made = _setup(task, policy, instructions)
     batch = batch if batches(made) else 1
+    most = getattr(made, "max_batch", None)
+    if most is not None and batch > most:  # (before any episode: the run stops, nothing kept)
+        raise ValueError(f"{policy} plays at most {most} episodes at once; evaluate it with "
+                         f"--batch {most} or fewer")
     positions = [p % batch for p in positions] if positions is not None else [
         k % batch for k in range(len(seeds))]
     envs, made = _setup(task, policy, instructions, max(positions, default=0) + 1)

@@ -18,6 +18,11 @@ in numbered slots 0..B-1:
   a policy can run its network on a fixed number of rows whatever is asked. An exception
   ends every episode that was asked; a bad answer (NaN, a wrong shape) only its own.
 - ``status_batch(slot)``, optional: ``status()`` of that slot's episode.
+- ``max_batch``, optional: the most slots ``act_batch`` takes (a policy server's announced
+  slots); an evaluation asking more stops with a one-line error before its first episode.
+
+A policy that cannot be reached (``PolicyUnavailable``: its server is down, or not a policy
+server) stops the evaluation instead of ending episodes it never played: a re-run resumes there.
 
 A slot's episode must not depend on the other slots' (what the evaluation records of a seed
 would otherwise depend on its neighbours). A policy without ``act_batch`` is played one
@@ -33,6 +38,11 @@ from __future__ import annotations
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+
+
+class PolicyUnavailable(ConnectionError):
+    """The policy cannot be reached at all (its server refused or is not one): nothing about
+    the episode, which evaluation therefore does not record."""
 
 
 @runtime_checkable

@@ -23,10 +23,10 @@ from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 import numpy as np
-from websockets.exceptions import ConnectionClosed
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 from websockets.sync.client import connect
 
-from rmbench.policies.base import BasePolicy
+from rmbench.policies.base import BasePolicy, PolicyUnavailable
 from rmbench.policies.registry import register_policy
 from rmbench.serve import openpi
 from rmbench.serve.wire import MAX_MESSAGE_BYTES, PROTOCOL, pack, unpack
@@ -72,9 +72,15 @@ class RemotePolicy(BasePolicy):
                 self.url, max_size=MAX_MESSAGE_BYTES, open_timeout=self.timeout,
                 compression=None))
         except OSError as err:  # (refused, no such host): the address said with the reason
-            raise ConnectionError(f"{self.url}: {err.strerror or err}") from None
+            raise PolicyUnavailable(f"{self.url}: {err.strerror or err}") from None
+        except (InvalidHandshake, InvalidURI) as err:  # (something else answers there)
+            raise PolicyUnavailable(f"{self.url} is not a websocket server: {err}") from None
         try:
             metadata = unpack(self.ws.recv(timeout=self.timeout))
+        except (TimeoutError, ConnectionClosed) as err:
+            self._disconnect()
+            raise PolicyUnavailable(f"{self.url} sent no greeting: {type(err).__name__}: "
+                                    f"{err}") from None
         except Exception:
             self._disconnect()
             raise
@@ -96,6 +102,7 @@ class RemotePolicy(BasePolicy):
         # the slots the server serves side by side on a connection (0: one episode at a time)
         batch = metadata.get("batch") if adapter == "rmbench" else 0
         self.served_slots = batch if type(batch) is int and batch > 0 else 0
+        self.max_batch = self.served_slots or None
         # the cameras the served policy reads, which the observations sent carry
         self.served_cameras = (tuple(metadata.get("cameras", ())) if adapter == "rmbench"
                                else tuple(openpi.CAMERA_KEYS))
@@ -109,7 +116,10 @@ class RemotePolicy(BasePolicy):
         self.ws = None
         self.episode_open, self.open_slots = False, set()  # the server dropped them
 
-    def _call(self, msg: dict[str, Any]) -> Any:
+    def _call(self, msg: dict[str, Any], again: bool = False) -> Any:
+        """The reply to ``msg``. ``again``: a message that starts an episode, which a broken
+        connection is sent once more on a fresh one (nothing of an episode was on it), so a
+        restarted server is reached again and a server gone is ``PolicyUnavailable``."""
         if self.ws is None:
             self._connect()
         try:
@@ -118,11 +128,16 @@ class RemotePolicy(BasePolicy):
         except (TimeoutError, ConnectionClosed, OSError) as err:
             # the reply may still come: only a fresh connection is sure not to read it
             self._disconnect()
+            if again and not isinstance(err, TimeoutError):
+                return self._call(msg)
             what = (f"no reply within {self.timeout:g} s" if isinstance(err, TimeoutError)
                     else f"{type(err).__name__}: {err}")
             raise RuntimeError(f"{self.url}: {what}; connection closed, the next episode "
                                f"reconnects") from None
-        return raw if isinstance(raw, str) else unpack(raw)
+        if isinstance(raw, str):  # (openpi's server sends its error as text, then closes)
+            self._disconnect()
+            return raw
+        return unpack(raw)
 
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
         self.prompt = instruction
@@ -130,7 +145,7 @@ class RemotePolicy(BasePolicy):
             # the server ends the slots' episodes too, as they share the policy's state
             self.episode_open, self.open_slots = False, set()
             self._rmbench_reply(self._call(
-                {"reset": True, "instruction": instruction, "task_info": task_info}))
+                {"reset": True, "instruction": instruction, "task_info": task_info}, again=True))
             self.episode_open = True
 
     def act(self, observation: dict[str, Any]) -> np.ndarray:
@@ -140,8 +155,10 @@ class RemotePolicy(BasePolicy):
         if self.ws is None or not self.episode_open:
             raise RuntimeError(f"{self.url}: the connection was lost in this episode; the "
                                f"next reset reconnects")
-        actions = np.asarray(self._rmbench_reply(self._call(self._served(observation)))["actions"])
-        return self._cut(actions)
+        reply = self._rmbench_reply(self._call(self._served(observation)))
+        if "actions" not in reply:
+            raise RuntimeError(f"server replied without actions: {sorted(reply)[:8]}")
+        return self._cut(np.asarray(reply["actions"]))
 
     def _cut(self, actions: np.ndarray) -> np.ndarray:
         """The first ``steps`` actions of a chunk (``?steps=N``)."""
@@ -195,6 +212,11 @@ def _remote(arg: str | None, env) -> RemotePolicy:
         if task != policy.metadata.get("task"):
             policy.close()
             raise ValueError(f"{policy.url} serves {policy.metadata.get('task')!r}, not {task!r}")
+        served = policy.metadata.get("gym_id")
+        if served is not None and served != type(u.task).gym_id:
+            policy.close()
+            raise ValueError(f"{policy.url} serves {served}, this rmbench's {task} is "
+                             f"{type(u.task).gym_id} (CHANGELOG.md)")
         if policy.metadata.get("state_dim") is not None and not u.with_state:
             policy.close()
             raise ValueError(f"{policy.url} reads environment_state: make the env with "
@@ -217,7 +239,7 @@ class BatchedRemotePolicy(RemotePolicy):
         self.open_slots.discard(slot)
         self.statuses.pop(slot, None)
         self._rmbench_reply(self._call({"reset": True, "slot": slot, "instruction": instruction,
-                                        "task_info": task_info}))
+                                        "task_info": task_info}, again=True))
         self.open_slots.add(slot)
 
     def act_batch(self, observations: list[dict[str, Any] | None]) -> list[Any]:

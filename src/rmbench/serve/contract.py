@@ -23,6 +23,7 @@ import numpy as np
 
 from rmbench.serve.wire import Limits, WireError
 from rmbench.sim.simulator import ACTION_DIM
+from rmbench.tasks import get_task
 
 FRAME_MAX = (480, 640)  # (H, W): VGA, twice the env's default 240x320
 MAX_TEXT = 4096  # an instruction, a subtask's name
@@ -143,11 +144,16 @@ class Contract:
                             f"{h}x{w}, got {what}")
 
     def check_reset(self, msg: dict) -> tuple[str, dict[str, Any]]:
-        """(instruction, task facts) of a reset message, or a WireError."""
+        """(instruction, task facts) of a reset message (its ``reset`` and ``slot`` taken out),
+        or a WireError."""
+        extra = sorted(str(k)[:40] for k in msg if k not in ("instruction", "task_info"))
+        if extra:
+            raise WireError(f"unexpected entries {extra[:4]} in a reset; entries: reset, "
+                            f"slot, instruction, task_info")
         instruction = msg.get("instruction", "")
         if not isinstance(instruction, str):
             raise WireError("a reset's instruction must be a string")
-        info = msg.get("task_info") or {}
+        info = msg.get("task_info", {})
         if not isinstance(info, dict):
             raise WireError("a reset's task_info must be a map")
         for key, value in info.items():
@@ -160,6 +166,9 @@ class Contract:
                                 f"{type(value).__name__}")
         if "task" in info and info["task"] != self.task:
             raise WireError(f"this server serves {self.task!r}, not {info['task'][:40]!r}")
+        gym_id = get_task(self.task).gym_id
+        if "gym_id" in info and info["gym_id"] != gym_id:  # (a task version its policy is not for)
+            raise WireError(f"this server serves {gym_id}, not {info['gym_id'][:40]}")
         if "seed" in info and not 0 <= info["seed"] < 2**63:
             raise WireError(f"task_info seed must be in [0, 2**63), got {info['seed']}")
         if not all(isinstance(s, str) for s in info.get("subtasks", ())):

@@ -39,7 +39,8 @@ def observation_to_openpi(observation: dict[str, Any], prompt: str) -> dict[str,
 def actions_from_openpi(reply: Any, steps: int | None) -> np.ndarray:
     """The first ``steps`` actions of the chunk (all when None), as float64 (k, 14)."""
     if isinstance(reply, str):  # openpi's server sends a traceback as text, then closes
-        raise RuntimeError(f"openpi server error: {reply.strip().splitlines()[-1]}")
+        lines = reply.strip().splitlines()
+        raise RuntimeError(f"openpi server error: {lines[-1] if lines else '(empty message)'}")
     if not isinstance(reply, dict) or "actions" not in reply:
         raise RuntimeError(f"openpi reply has no 'actions': {type(reply).__name__}")
     actions = np.asarray(reply["actions"], dtype=np.float64)

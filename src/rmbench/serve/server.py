@@ -111,7 +111,8 @@ class PolicyServer:
 
     def metadata(self) -> dict[str, Any]:
         return {"server": "rmbench", "protocol": PROTOCOL, "policy": self.spec, "task": self.task,
-                "action_dim": ACTION_DIM, **self.contract.greeting()}
+                "gym_id": get_task(self.task).gym_id, "action_dim": ACTION_DIM,
+                **self.contract.greeting()}
 
     def handle(self, ws: ServerConnection) -> None:
         with self._count:
