@@ -9,13 +9,43 @@ naming it (``read_json_object``).
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
+
+
+class Locked(RuntimeError):
+    """A lock another process holds; ``holder`` its pid as it wrote it ("" if unknown)."""
+
+    def __init__(self, path: Path, holder: str):
+        super().__init__(f"{path} is locked by process {holder or '?'}")
+        self.path, self.holder = path, holder
+
+
+def lock(path: str | Path) -> IO[str]:
+    """An exclusive lock on ``path`` (created, with this process's pid in it): the open file,
+    whose closing releases it, as does the process's end however it ends; ``Locked`` if
+    another process holds it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    f: IO[str] = open(path, "a+")
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        f.seek(0)
+        holder = f.read().strip()
+        f.close()
+        raise Locked(path, holder) from None
+    f.seek(0)
+    f.truncate()
+    f.write(f"{os.getpid()}\n")
+    f.flush()
+    return f
 
 
 @contextmanager

@@ -69,8 +69,6 @@ def _check(root) -> dict:
         if key not in info["features"]:
             _fail(f"{root / L.INFO}: no feature {key!r}")
     stats = read_json(root / L.STATS)
-    if not isinstance(stats, dict):
-        _fail(f"{root / L.STATS}: not a JSON object")
     features = info["features"]
     for key in features:
         if info["total_episodes"] and key not in stats:

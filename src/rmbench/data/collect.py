@@ -21,7 +21,7 @@ from rmbench.data.writer import DatasetWriter
 from rmbench.envs.noise import NoiseSpec
 from rmbench.parallel import BACKENDS, make_executor
 from rmbench.seeds import TRAIN_SEED_END, check_training_seed
-from rmbench.sim.station import StationConfig
+from rmbench.sim.station import ALL_CAMERAS, StationConfig
 from rmbench.tasks import get_task
 
 log = logging.getLogger(__name__)
@@ -61,9 +61,11 @@ class CollectConfig:
             raise ValueError(f"search must be one of {SEARCH_MODES}, got {self.search!r}")
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
-        unknown = sorted(set(self.cameras) - set(StationConfig().cameras))
+        unknown = sorted(set(self.cameras) - set(ALL_CAMERAS))
         if unknown:
-            raise ValueError(f"unknown camera(s) {unknown}; cameras: {list(StationConfig().cameras)}")
+            raise ValueError(f"unknown camera(s) {unknown}; cameras: {list(ALL_CAMERAS)}")
+        if len(set(self.cameras)) != len(self.cameras):
+            raise ValueError(f"cameras named twice: {list(self.cameras)}")
         L.Spec(self.cameras, self.width, self.height)  # validates the resolution
 
     @property
@@ -124,6 +126,7 @@ def collect(cfg: CollectConfig) -> CollectSummary:
     writer = DatasetWriter(cfg.out, cfg.task, cfg.spec, cfg.identity(), overwrite=cfg.overwrite)
     start_episodes = writer.num_episodes
     if start_episodes > cfg.episodes:
+        writer.close()
         raise ValueError(f"{cfg.out} already holds {start_episodes} episodes, more than the "
                          f"{cfg.episodes} asked; ask for at least {start_episodes}")
     max_attempts = cfg.max_attempts or 10 * cfg.episodes + 20

@@ -259,7 +259,11 @@ def copy_layouts(source: str | Path, out: str | Path, copies: int, reach: float,
                                          "source_episodes": n}}
     writer = DatasetWriter(out, src.task, spec, identity, overwrite=overwrite)
     start = writer.num_episodes
-    first, first_copy = _resume_point(writer, copies)
+    try:
+        first, first_copy = _resume_point(writer, copies)
+    except DatasetError:
+        writer.close()
+        raise
     executor = make_executor(workers, backend, on_close=_close_copier)
     calls = ((e, _copy, (str(src.root), e, copies, reach, seed, first_copy if e == first else 0))
              for e in range(first, n))

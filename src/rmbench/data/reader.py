@@ -85,23 +85,25 @@ def read_parquet(path: Path) -> pa.Table:
 
 
 def read_json(path: Path) -> dict:
+    """A JSON object (a map) from ``path``, or a DatasetError naming it."""
     try:
-        return json.loads(path.read_text())
+        value = json.loads(path.read_text())
     except FileNotFoundError:
         raise DatasetError(f"{path}: missing") from None
-    except (OSError, json.JSONDecodeError) as err:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise DatasetError(f"{path}: not readable JSON ({err})") from None
+    if not isinstance(value, dict):
+        raise DatasetError(f"{path}: not a JSON object (a {type(value).__name__})")
+    return value
 
 
 def _is_count(value) -> bool:
     return type(value) is int and value >= 0
 
 
-def check_info(info, path: Path) -> dict:
+def check_info(info: dict, path: Path) -> dict:
     """``info`` (meta/info.json) if it holds what a reader reads, of the types it reads them
     as; else a one-line DatasetError naming the first field that does not."""
-    if not isinstance(info, dict):
-        raise DatasetError(f"{path}: not a JSON object")
     if info.get("codebase_version") != L.CODEBASE_VERSION:
         raise DatasetError(f"{path}: codebase_version {info.get('codebase_version')!r}, "
                            f"expected {L.CODEBASE_VERSION!r}")
@@ -153,6 +155,11 @@ def _names(path: Path, index: str, column_name: str) -> list[str]:
     return [str(t) for t in ordered.index]
 
 
+# the columns Dataset.episode reads from a data file
+DATA_COLUMNS = (L.STATE, L.EE_POSE, L.ACTION, L.SUBTASK_INDEX, L.SUBTASK_END, L.PROGRESS,
+                "timestamp", "episode_index", L.SUBTASK_STEP)
+
+
 def column(table: pa.Table, name: str) -> np.ndarray:
     col = table.column(name).combine_chunks()
     if pa.types.is_fixed_size_list(col.type) or pa.types.is_list(col.type):
@@ -177,6 +184,8 @@ class Dataset:
                 f"{self.root / L.RMBENCH}: dataset format {self.rmbench.get('format')!r}, this rmbench "
                 f"reads {L.FORMAT!r} (one subtask per plan step): collect it again with rmbench collect")
         self._check_version()
+        if not isinstance(self.rmbench.get("collection"), dict):
+            raise DatasetError(f"{self.root / L.RMBENCH}: no record of how it was collected")
         self.features: dict[str, dict] = self.info["features"]
         self.fps: int = self.info["fps"]
         self.cameras = [k[len(L.IMAGE_PREFIX):] for k, f in self.features.items()
@@ -267,7 +276,11 @@ class Dataset:
     @cached_property
     def stats(self) -> dict[str, dict[str, np.ndarray]]:
         """meta/stats.json: per feature, its min, max, mean, std and count as arrays."""
-        return from_json(read_json(self.root / L.STATS))
+        path = self.root / L.STATS
+        try:
+            return from_json(read_json(path))
+        except (AttributeError, TypeError, ValueError) as err:  # (a feature's entry not a map)
+            raise DatasetError(f"{path}: not the statistics this rmbench writes ({err})") from None
 
     @cached_property
     def lengths(self) -> np.ndarray:
@@ -275,6 +288,23 @@ class Dataset:
 
     def video_path(self, camera: str, episode: int) -> Path:
         return self.root / L.video_file(L.image_key(camera), episode)
+
+    def _data(self, index: int, row: dict) -> pa.Table:
+        """Episode ``index``'s data file, checked against its meta row: the columns an
+        episode is read from, its length, and its own episode index in every row (a file
+        copied over another episode's, or cut short, is an error naming it, not another
+        episode's frames)."""
+        path = self.root / L.data_file(index)
+        table = read_parquet(path)
+        missing = [c for c in DATA_COLUMNS if c not in table.column_names]
+        if missing:
+            raise DatasetError(f"{path}: no column(s) {missing}")
+        if len(table) != row["length"]:
+            raise DatasetError(f"{path}: {len(table)} rows, its episode's length is {row['length']}")
+        own = column(table, "episode_index")
+        if len(own) and not (own == index).all():
+            raise DatasetError(f"{path}: rows of episode {int(own[own != index][0])}, not {index}")
+        return table
 
     def episode(self, index: int, cameras: list[str] | tuple[str, ...] | None = None) -> Episode:
         """Episode ``index`` with frames of ``cameras`` (all by default; ``[]`` for none)."""
@@ -285,7 +315,7 @@ class Dataset:
         if unknown:
             raise DatasetError(f"camera(s) {unknown} not in the dataset; it has {self.cameras}")
         row = self.episodes[index]
-        table = read_parquet(self.root / L.data_file(index))
+        table = self._data(index, row)
         ep = Episode(
             index=index, seed=int(row["rmbench/seed"]), task=row["rmbench/task"],
             instruction=row["tasks"][0], tmc=row["rmbench/tmc"],

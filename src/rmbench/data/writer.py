@@ -26,7 +26,9 @@ from rmbench.data.record import EpisodeRecord
 from rmbench.data.stats import aggregate, array_stats, pop_stats, to_json
 from rmbench.files import (
     FileFormatError,
+    Locked,
     atomic_path,
+    lock,
     read_json_object,
     remove_leftovers,
     write_atomic,
@@ -102,8 +104,12 @@ def episode_stats(table: pa.Table, rec: EpisodeRecord, spec: L.Spec) -> dict[str
     return stats
 
 
+WRITING = ".writer.lock"  # the lock file one writer holds in a dataset's folder
+
+
 class DatasetWriter:
-    """Owns one dataset folder while a collection runs."""
+    """Owns one dataset folder while a collection runs: a second writer of the same folder is
+    refused (``WRITING``), as its resume would delete the first one's episode in progress."""
 
     def __init__(self, root: str | Path, task: str, spec: L.Spec, collection: dict[str, Any],
                  overwrite: bool = False):
@@ -118,6 +124,19 @@ class DatasetWriter:
         # Record observation.environment_state; False when extending a dataset whose
         # episodes were collected before that column existed.
         self.environment_state = True
+        try:
+            self._lock = lock(self.root / WRITING)
+        except Locked as err:
+            raise DatasetError(f"{self.root} is being written by another process "
+                               f"({err.holder or '?'}): wait for it to end, or use another "
+                               f"--out") from None
+        try:
+            self._open(overwrite)
+        except BaseException:
+            self._lock.close()
+            raise
+
+    def _open(self, overwrite: bool) -> None:
         remove_leftovers((self.root / L.RMBENCH).parent)  # (data and videos: _resume's own)
         if overwrite and self.root.exists():
             self._remove()
@@ -189,11 +208,18 @@ class DatasetWriter:
         return e
 
     def skip(self, seed: int, reason: str) -> None:
+        """A seed the collection passed over, kept at once: a run killed before its next
+        commit resumes knowing it (the seeds tried, and so the dataset, are those of a run
+        never stopped)."""
         log.info("seed %d skipped: %s", seed, reason)
         self.skipped.append({"seed": int(seed), "reason": reason})
+        self._write_rmbench()
 
     def close(self) -> None:
-        self._write_dataset_meta()
+        try:
+            self._write_dataset_meta()
+        finally:
+            self._lock.close()
 
     # -------------------------------------------------------- derived metadata
     def _write_dataset_meta(self) -> None:
@@ -210,11 +236,7 @@ class DatasetWriter:
         tasks = pd.DataFrame({"task_index": np.arange(len(self.instructions), dtype=np.int64)},
                              index=pd.Index(self.instructions, name="task"))
         # rmbench.json first: a folder stopped anywhere after it is known as this dataset's
-        write_json(self.root / L.RMBENCH, {
-            "format": L.FORMAT, "task": self.task.name, "gym_id": self.task.gym_id,
-            "tmc": self.task.tmc, "step_limit": self.task.step_limit,
-            "subtasks": list(self.task.subtasks), "collection": self.collection,
-            "episodes": n, "skipped": self.skipped}, indent=2)
+        self._write_rmbench()
         write_parquet(self.root / L.TASKS, pa.Table.from_pandas(tasks))
         # LeRobot's own subtask table: text as the index, so a frame's ``subtask_index``
         # gives ``item["subtask"]`` in LeRobotDataset.
@@ -224,13 +246,26 @@ class DatasetWriter:
         write_json(self.root / L.STATS, to_json(aggregate(self._stats)), indent=2)
         write_json(self.root / L.INFO, info, indent=2)  # last: a reader sees counts that match the files
 
+    def _write_rmbench(self) -> None:
+        write_json(self.root / L.RMBENCH, {
+            "format": L.FORMAT, "task": self.task.name, "gym_id": self.task.gym_id,
+            "tmc": self.task.tmc, "step_limit": self.task.step_limit,
+            "subtasks": list(self.task.subtasks), "collection": self.collection,
+            "episodes": self.num_episodes, "skipped": self.skipped}, indent=2)
+
     # ----------------------------------------------------------------- resume
     def _resume(self) -> None:
+        path = self.root / L.RMBENCH
         try:
-            saved = json.loads((self.root / L.RMBENCH).read_text())
-        except (OSError, json.JSONDecodeError) as err:
-            raise DatasetError(f"{self.root / L.RMBENCH} is unreadable ({err}); pass --overwrite "
-                               f"to start over") from err
+            saved = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+            raise DatasetError(f"{path} is unreadable ({err}); pass --overwrite to start "
+                               f"over") from err
+        skipped = saved.get("skipped", []) if isinstance(saved, dict) else None
+        if not (isinstance(skipped, list) and all(
+                isinstance(s, dict) and type(s.get("seed")) is int for s in skipped)):
+            raise DatasetError(f"{path} is not the record this rmbench writes; pass --overwrite "
+                               f"to start over")
         layout = {"format": L.FORMAT, "gym_id": self.task.gym_id}
         what = differences({k: saved.get(k) for k in layout}, layout)
         if what:  # another layout or task version: its episodes cannot join these
@@ -241,9 +276,12 @@ class DatasetWriter:
         if what:
             raise DatasetError(f"{self.root} was collected with other arguments ({what}); run "
                                f"with the same arguments to resume, or --overwrite to start over")
-        for path in _committed_episode_files(self.root):
-            table = pq.read_table(path)
+        for meta in _committed_episode_files(self.root):
+            table = pq.read_table(meta)
             row = {k: v[0] for k, v in table.to_pydict().items()}
+            if type(row.get("rmbench/seed")) is not int:
+                raise DatasetError(f"{meta}: no episode seed; the dataset is damaged, "
+                                   f"--overwrite to start over")
             stats = pop_stats(row)
             self.episodes.append(row)
             self._stats.append(stats)
@@ -262,7 +300,7 @@ class DatasetWriter:
                                        f"{self.task.name}'s state_names now; --overwrite to "
                                        f"start over")
         last_seed = self.episodes[-1]["rmbench/seed"] if self.episodes else -1
-        self.skipped = [s for s in saved.get("skipped", []) if s["seed"] < last_seed]
+        self.skipped = [s for s in skipped if s["seed"] < last_seed]
         removed = self._remove_uncommitted()
         if removed:
             log.warning("removed %d file(s) of an interrupted episode in %s", removed, self.root)
@@ -284,13 +322,17 @@ class DatasetWriter:
     def _remove(self) -> None:
         if not (self.root / L.RMBENCH).exists() and _holds_files(self.root):
             raise DatasetError(f"refusing to delete {self.root}: it is not an rmbench dataset")
-        shutil.rmtree(self.root)
+        for path in self.root.iterdir():  # all but the lock this writer holds
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            elif path.name != WRITING:
+                path.unlink()
 
 
 def _holds_files(root: Path) -> bool:
-    """Whether ``root`` holds any file (empty folders, such as a start stopped before its
-    first file, do not count)."""
-    return any(p.is_file() for p in root.rglob("*"))
+    """Whether ``root`` holds any file but a writer's lock (empty folders, such as a start
+    stopped before its first file, do not count)."""
+    return any(p.is_file() and p != root / WRITING for p in root.rglob("*"))
 
 
 _FILE = re.compile(r"chunk-(\d+)[/\\]file-(\d+)\.(parquet|mp4)$")
@@ -302,7 +344,9 @@ def _episode_of(path: Path) -> int | None:
 
 
 def _committed_episode_files(root: Path) -> list[Path]:
-    """meta/episodes files of episodes 0, 1, ... up to the first gap."""
+    """meta/episodes files of episodes 0, 1, ...: episodes commit in order, so one missing
+    before a later one (or fewer than info.json counts) is damage, a DatasetError, never the
+    place a resume starts over from (which deletes what follows)."""
     found = {}
     for path in (root / L.EPISODES_DIR).glob("chunk-*/file-*.parquet"):
         e = _episode_of(path)
@@ -311,4 +355,15 @@ def _committed_episode_files(root: Path) -> list[Path]:
     out = []
     while len(out) in found:
         out.append(found[len(out)])
+    counted = 0
+    if (root / L.INFO).exists():
+        try:
+            counted = json.loads((root / L.INFO).read_text()).get("total_episodes", 0)
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError):
+            counted = 0  # (a damaged info.json is the resume's to report)
+    if len(found) > len(out) or (type(counted) is int and counted > len(out)):
+        missing = root / L.episodes_file(len(out))
+        raise DatasetError(f"{missing} is missing while the dataset holds "
+                           f"{max(len(found), counted)} episodes: it is damaged; restore the "
+                           f"file, or --overwrite to start over")
     return out

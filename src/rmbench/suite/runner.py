@@ -14,14 +14,12 @@ plans only what is missing. One table at a time runs a task in an ``OUT``
 from __future__ import annotations
 
 import contextlib
-import fcntl
-import os
 import signal
 import threading
 import time
 from pathlib import Path
-from typing import IO
 
+from rmbench.files import Locked, lock
 from rmbench.machine import usable_cores
 from rmbench.suite import clock, stages
 from rmbench.suite.backends import LocalJobs, RayJobs
@@ -124,21 +122,13 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
 def _holding(path: Path):
     """An exclusive lock on ``path`` (released when the process ends, however it ends), or a
     one-line error naming the process that holds it."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    f: IO[str] = open(path, "a+")
     try:
-        try:
-            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            f.seek(0)
-            pid = f.read().strip()
-            raise RuntimeError(f"{path.parent} is in use by another rmbench table"
-                               f"{f' (process {pid})' if pid else ''}: wait for it to end, "
-                               f"or use another --out") from None
-        f.seek(0)
-        f.truncate()
-        f.write(f"{os.getpid()}\n")
-        f.flush()
+        f = lock(path)
+    except Locked as err:
+        raise RuntimeError(f"{path.parent} is in use by another rmbench table"
+                           f"{f' (process {err.holder})' if err.holder else ''}: wait for it "
+                           f"to end, or use another --out") from None
+    try:
         yield
     finally:
         f.close()
