@@ -333,6 +333,12 @@ def test_train_cli_for_baselines(dataset, tmp_path, capsys):
     assert "Mem-0's" in capsys.readouterr().err
     assert main(base + ["--set", "kl_weight=1"]) == 2  # an ACT field
     assert "unknown config field" in capsys.readouterr().err
+    # a value of another type, or one the model cannot take, in one line naming the field
+    assert main(base + ["--set", "horizon=x"]) == 2
+    assert "horizon must be int, got str 'x'" in capsys.readouterr().err
+    act = ["train", "act", "--dataset", str(dataset), "--out", str(tmp_path / "y")]
+    assert main(act + ["--set", "heads=0"]) == 2
+    assert "must be divisible by heads 0 (>= 1)" in capsys.readouterr().err
     assert main(base + ["--steps", "2", "--batch-size", "2"]) == 2  # 3 cameras asked, 2 recorded
     assert "no ['right_wrist'] camera" in capsys.readouterr().err
 

@@ -173,3 +173,31 @@ def test_obs_types():
         env.close()
     with pytest.raises(ValueError, match="obs_type must be one of .*environment_state_agent_pos"):
         rmbench.make("put_back_block", obs_type="state")
+
+
+def test_a_step_ended_by_a_physics_error_has_every_key_of_a_step():
+    env = rmbench.make("put_back_block", render=False)
+    obs, _ = env.reset(seed=0)
+    keys = set(env.step(obs["agent_pos"])[4])
+    env.unwrapped.sim.data.qvel[:] = np.nan
+    info = env.step(obs["agent_pos"])[4]
+    assert keys <= set(info) and info["subtask_end"] is False
+    assert info["step"] == 2 and info["failure_reason"].startswith("sim error")
+
+
+def test_a_reset_that_fails_leaves_no_episode_to_step():
+    """A hidden value the task refuses fails the reset after the old episode was torn down:
+    step() then refuses instead of going on with half of it. Unknown options are named."""
+    env = rmbench.make("put_back_block", render=False)
+    obs, _ = env.reset(seed=0)
+    with pytest.raises(ValueError):
+        env.reset(seed=1, options={"hidden": {"original_mat": "nowhere"}})
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(obs["agent_pos"])
+    with pytest.raises(ValueError, match=r"unknown reset option\(s\) \['hiden'\]; options: "
+                                         r"\['hidden'\]"):
+        env.reset(seed=1, options={"hiden": {"original_mat": "left"}})
+    env.reset(seed=1, options={"hidden": {"original_mat": "left"}})
+    env.step(obs["agent_pos"])
+    with pytest.raises(ValueError, match="cameras=\\('head',\\)"):
+        rmbench.make("put_back_block", cameras="head")

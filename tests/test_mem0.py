@@ -490,6 +490,10 @@ def test_train_cli_errors(mn_dataset, tmp_path, capsys):
     assert "not a training ablation" in capsys.readouterr().err
     assert main(base + ["--set", "nope=1"]) == 2
     assert "unknown config field" in capsys.readouterr().err
+    assert main(base + ["--set", "dim=x"]) == 2
+    assert "dim must be int, got str 'x'" in capsys.readouterr().err
+    assert main(base + ["--set", "heads=0"]) == 2
+    assert "must be divisible by heads 0 (>= 1)" in capsys.readouterr().err
     assert main(["train", "mem0", "--dataset", str(tmp_path / "none"), "--out", str(tmp_path / "y")]) == 2
 
 
@@ -1020,3 +1024,18 @@ def test_codec_frames_read_the_cameras_through_one_codec_stream_per_episode(mn_c
 def test_codec_frames_is_refused_for_a_state_checkpoint(mn_state_ckpt):
     with pytest.raises(ValueError, match="codec_frames passes camera frames"):
         Mem0Policy(f"{mn_state_ckpt}?codec_frames=true")
+
+
+def test_a_config_edited_into_another_type_is_an_error_naming_the_checkpoint(mn_ckpt, tmp_path):
+    import shutil
+
+    from rmbench.policies.checkpoint import CheckpointError
+    from rmbench.policies.mem0.agent import load_mem0
+
+    ckpt = tmp_path / "ckpt"
+    shutil.copytree(mn_ckpt, ckpt)
+    describe = json.loads((ckpt / "config.json").read_text())
+    describe["config"]["heads"] = "4"
+    (ckpt / "config.json").write_text(json.dumps(describe))
+    with pytest.raises(CheckpointError, match=f"{ckpt}: heads must be int, got str '4'"):
+        load_mem0(ckpt)

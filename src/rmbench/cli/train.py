@@ -32,7 +32,10 @@ def run_training(policy: str, dataset: str, out: str, *, steps: int, batch_size:
                              f"chosen at evaluation: mem0:CKPT?ablation=gt_classifier)")
     elif ablations or executor_from:
         raise ValueError(f"--ablation and --executor-from are Mem-0's; {policy} has neither")
-    cfg = config_cls(**parse_overrides(config_cls, overrides))
+    try:
+        cfg = config_cls(**parse_overrides(config_cls, overrides))
+    except (TypeError, ZeroDivisionError) as err:  # (a value of the wrong type or size)
+        raise ValueError(f"--set {' '.join(overrides)}: {err}") from None
     if ablations:
         cfg = replace(cfg, ablations=tuple(ablations))
     extra = {} if executor_from is None else {"executor_from": executor_from}

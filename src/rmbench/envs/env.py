@@ -29,6 +29,7 @@ from rmbench.tasks.state import bounds as state_bounds
 
 log = logging.getLogger(__name__)
 SETTLE_STEPS = 50  # physics steps (0.1 s) after placing objects, before the first frame
+RESET_OPTIONS = ("hidden",)  # what reset(options=...) takes
 OBS_TYPES = ("pixels_agent_pos", "environment_state_agent_pos",
              "pixels_environment_state_agent_pos")
 
@@ -63,6 +64,9 @@ class RMBenchEnv(gym.Env):
             raise ValueError(f"instructions must be 'seen' or 'unseen', got {instructions!r}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
+        if isinstance(cameras, str):  # ("head", not its letters)
+            raise ValueError(f"cameras must be a list of names, got the string {cameras!r}: "
+                             f"cameras=({cameras!r},)")
         kwargs = {} if cameras is None else {"cameras": tuple(cameras)}
         self.config = StationConfig(width=width, height=height, render=render, **kwargs)
         self.task: Task = task_cls()
@@ -112,6 +116,12 @@ class RMBenchEnv(gym.Env):
         return self._last.stage if self._last is not None else 0
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        # until this reset has finished, no episode runs: a reset that fails (a hidden value
+        # the task refuses) leaves no half-reset episode for step() to go on with
+        self._done = True
+        unknown = sorted(map(str, set(options or {}) - set(RESET_OPTIONS)))
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; options: {list(RESET_OPTIONS)}")
         super().reset(seed=seed)
         sim, task = self.sim, self.task
         mujoco.mj_resetData(sim.model, sim.data)
@@ -144,8 +154,12 @@ class RMBenchEnv(gym.Env):
         except SimulationError as err:
             log.warning("physics error in %s: %s", type(self.task).name, err)
             self._done = True
-            info.update(sim_error=str(err), is_success=False, progress=self._last.progress,
-                        failure_reason=f"sim error: {err}")
+            self._steps += 1
+            # every key a step's info holds, the task's as of the last sound step
+            info.update(sim_error=str(err), is_success=False, failure=False,
+                        failure_reason=f"sim error: {err}", progress=self._last.progress,
+                        predicates=self._last.predicates, step=self._steps,
+                        **self._subtask_info(self._last, ended=False))
             return self._observation(safe=True), 0.0, True, False, info
         ev = self.task.evaluate()
         reward = ev.progress - self._last.progress

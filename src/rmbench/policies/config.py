@@ -6,11 +6,27 @@ takes in ``rmbench eval`` and ``rmbench serve``."""
 
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, get_type_hints
 from urllib.parse import parse_qsl
+
+SCALARS = (bool, int, float, str)
+
+
+@functools.cache
+def _scalar_fields(cls: type) -> dict[str, type]:
+    """The fields of ``cls`` declared a plain bool, int, float or str."""
+    hints = get_type_hints(cls)
+    return {f.name: hints[f.name] for f in fields(cls) if hints.get(f.name) in SCALARS}
+
+
+def _of_type(value: Any, kind: type) -> bool:
+    if kind is float:  # (JSON writes 0.0 as 0)
+        return type(value) in (int, float)
+    return type(value) is kind
 
 
 @dataclass(frozen=True)
@@ -22,6 +38,13 @@ class PolicyConfig:
         for f in fields(self):
             if isinstance(getattr(self, f.name), list):
                 object.__setattr__(self, f.name, tuple(getattr(self, f.name)))
+        # a value of another type (``--set dim=x``, a config edited by hand) said by name,
+        # not as whatever a later division or comparison raises
+        for name, kind in _scalar_fields(type(self)).items():
+            value = getattr(self, name)
+            if not _of_type(value, kind):
+                raise ValueError(f"{name} must be {kind.__name__}, got {type(value).__name__} "
+                                 f"{value!r:.40}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -48,8 +48,8 @@ class ACTConfig(VisuomotorConfig):
         super().__post_init__()
         if self.obs_steps != 1:
             raise ValueError("ACT reads one observation step (obs_steps = 1)")
-        if self.dim % self.heads:
-            raise ValueError(f"dim {self.dim} must be divisible by heads {self.heads}")
+        if self.heads < 1 or self.dim % self.heads:
+            raise ValueError(f"dim {self.dim} must be divisible by heads {self.heads} (>= 1)")
         if self.temporal_ensemble < 0:
             raise ValueError("temporal_ensemble must be >= 0 (0 turns it off)")
         if not 0 <= self.ensemble_window <= self.horizon:

@@ -53,7 +53,10 @@ def load_mem0(path: str | Path, ablations: tuple[str, ...] = (),
     """(model, config, describe) from a checkpoint; inference ablations added and inference
     fields (``Mem0Config.INFERENCE_FIELDS``) overridden."""
     describe = read_config(path, "mem0")
-    cfg = Mem0Config.from_dict(describe["config"])
+    try:
+        cfg = Mem0Config.from_dict(describe["config"])
+    except (TypeError, ValueError, ZeroDivisionError) as err:  # (a config edited by hand)
+        raise CheckpointError(f"{path}: {err}") from None
     missing = [a for a in ablations if a in TRAINED_ABLATIONS and a not in cfg.ablations]
     if missing:
         raise CheckpointError(f"{path} was trained without {missing[0]}, which changes training: "

@@ -207,8 +207,8 @@ class Mem0Config(ReadsObservation, PolicyConfig):
             raise ValueError(f"planner cameras {self.planner_cameras} must be among {self.cameras}")
         if not 1 <= self.execute <= self.horizon:
             raise ValueError(f"execute (D={self.execute}) must be in [1, horizon={self.horizon}]")
-        if self.dim % self.heads:
-            raise ValueError(f"dim {self.dim} must be divisible by heads {self.heads}")
+        if self.heads < 1 or self.dim % self.heads:
+            raise ValueError(f"dim {self.dim} must be divisible by heads {self.heads} (>= 1)")
         if self.action_patch < 1 or self.horizon % self.action_patch:
             raise ValueError(f"action_patch ({self.action_patch}) must be >= 1 and divide the "
                              f"horizon ({self.horizon})")
