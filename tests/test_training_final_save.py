@@ -203,3 +203,23 @@ def test_a_resume_on_other_data_is_refused(tmp_path):
     state["data"] = None
     torch.save(state, out / loop.STATE)
     assert on("bbbb")["resumed_from"] == STEPS
+
+
+@pytest.mark.parametrize("damage", ["no identity", "another model", "identity not JSON"])
+def test_a_state_that_loads_but_is_not_this_runs_is_an_error_naming_it(tmp_path, damage):
+    out = tmp_path / "s"
+    cfg = TrainConfig(steps=SAVE_EVERY, save_every=SAVE_EVERY)
+    train(Line(), batches, cfg, out, {"policy": "line"}, progress=False,
+          write_checkpoint=save_checkpoint)
+    state = torch.load(out / loop.STATE, weights_only=True)
+    if damage == "no identity":
+        del state["identity"]
+    elif damage == "another model":
+        state["model"] = {"other.weight": torch.zeros(2)}
+    else:
+        state["identity"] = "{not json"
+    torch.save(state, out / loop.STATE)
+    with pytest.raises(loop.TrainingError, match=r"state\.pt: not a state this training can "
+                                                 r"resume from"):
+        train(Line(), batches, cfg, out, {"policy": "line"}, progress=False,
+              write_checkpoint=save_checkpoint)

@@ -124,6 +124,19 @@ def resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: di
             raise TrainingError(f"{out} exists and holds no training state; use another --out")
         return Kept()
     state = read_state(out, device)
+    try:
+        return _resumed(out, state, model, opt, identity, config_defaults, data)
+    except TrainingError:
+        raise
+    except (KeyError, TypeError, ValueError, RuntimeError, json.JSONDecodeError) as err:
+        # (a state that loads but is not what this run saves: keys missing, another model)
+        raise TrainingError(f"{out / STATE}: not a state this training can resume from "
+                            f"({type(err).__name__}: {str(err).splitlines()[0][:200]}); "
+                            f"use another --out") from None
+
+
+def _resumed(out: Path, state: dict, model, opt, identity: dict, config_defaults,
+             data) -> Kept:
     what = run_differences(json.loads(state["identity"]), identity, config_defaults)
     if what:
         raise TrainingError(f"{out} holds a training run with other arguments ({what}); "
