@@ -96,9 +96,7 @@ def _state_rows(res: dict, specs: list[str], extra: Callable[[str], list] = lamb
     skip = _needs_no_memory(res)
     cells, rows, groups = res["cells"], [], {}
     for task in ordered():
-        if task.name not in cells:
-            continue
-        row = cells[task.name]
+        row = cells.get(task.name, {})  # (a task not measured yet: its row and averages read —)
         groups.setdefault(task.tmc, []).append(task.name)
         rows.append([task.name, task.tmc]
                     + [(rate(row.get(s)) + _older(task.name, s, row.get(s)))
@@ -179,7 +177,7 @@ def _footnote(table: str, lead: str = "", marks: str | None = None) -> str:
 def _average(res: dict, specs: list[str], tasks: list[str], name: str, group: str) -> list[str]:
     out = [f"**{name}**", group]
     for s in specs:
-        vals = [res["cells"][t].get(s) for t in tasks]
+        vals = [res["cells"].get(t, {}).get(s) for t in tasks]
         if any(v is None for v in vals):
             out.append("n/a" if not all(applies(s, g) for g in ({group} if group else {"M(1)", "M(n)"}))
                        else "—")

@@ -138,3 +138,18 @@ def test_the_camera_tables_memory_gap_is_in_points():
     res = {"cells": {"put_back_block": {"mem0": cell(67), "mem0:no_memory": cell(0)}}}
     assert render_docs._memory_gap(res, "put_back_block") == ["+67 [+57, +75]*"]
     assert render_docs._memory_gap(res, "swap_T") == ["—"]
+
+
+def test_a_task_not_measured_reads_as_missing_and_empties_its_averages():
+    """A table's JSON without a task's cells shows its row as — and every average over it as
+    —, never an average over the other rows beside published ones over all of them."""
+    import json
+    from pathlib import Path
+
+    docs = _render_docs()
+    res = json.loads(Path("benchmarks/results/table_state.json").read_text())
+    res["cells"] = {t: c for t, c in res["cells"].items() if t not in ("swap_T", "press_button")}
+    rows = {r[0]: r[2:4] for r in docs._state_rows(res, ["mem0", "mem0:no_memory"])}
+    assert rows["swap_T"] == rows["press_button"] == ["—", "—"]
+    assert rows["**average M(1)**"] == rows["**average M(n)**"] == ["—", "—"]
+    assert rows["**average (all)**"] == ["—", "—"]

@@ -2,7 +2,13 @@
 
 import pytest
 
-from rmbench.eval.intervals import difference, format_rate, outside_noise, wilson
+from rmbench.eval.intervals import (
+    difference,
+    format_difference,
+    format_rate,
+    outside_noise,
+    wilson,
+)
 
 
 def test_wilson_matches_the_closed_form_values():
@@ -11,7 +17,7 @@ def test_wilson_matches_the_closed_form_values():
     assert wilson(20, 100) == pytest.approx((0.1333, 0.2888), abs=5e-4)
     assert wilson(0, 100) == pytest.approx((0.0, 0.0370), abs=5e-4)
     assert wilson(50, 100) == pytest.approx((0.4038, 0.5962), abs=5e-4)
-    assert wilson(100, 100)[1] == 1.0
+    assert wilson(100, 100) == pytest.approx((0.9630, 1.0), abs=5e-4)
 
 
 def test_wilson_is_symmetric_and_narrows_with_more_episodes():
@@ -60,3 +66,12 @@ def test_a_share_stores_its_rate_and_interval_and_nothing_where_nothing_was_coun
     assert (s["count"], s["of"], s["rate"]) == (43, 100, 0.43)
     assert s["ci95"] == [round(x, 4) for x in wilson(43, 100)]
     assert share(0, 0) == {"count": 0, "of": 0, "rate": None, "ci95": None}
+
+
+def test_a_difference_is_rounded_once_from_its_counts():
+    """163/200 against 7/100: the interval's low end is 0.654976, so +65 (4 decimals first
+    made it 0.6550 and +66); 151/200 - 68/100 is 7.5 points exactly, which a float holds as
+    7.4999999999999991 and must still round as the tie it is (to even, as the rates do)."""
+    assert format_difference(*difference(163, 200, 7, 100)) == "+74 [+65, +80]"
+    assert format_difference(*difference(16, 200, 16, 200)) == "0 [-5, +5]"
+    assert format_difference(*difference(151, 200, 68, 100)).startswith("+8 [")

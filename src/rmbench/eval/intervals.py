@@ -70,8 +70,10 @@ def format_rate(successes: int, n: int) -> str:
 
 def signed(points: float, digits: int = 0) -> str:
     """'+5', '-18', '0': ``points`` rounded to ``digits`` decimals with its sign, and without
-    one where it rounds to zero ("-0" would put a zero on one side of it)."""
-    text = f"{points:+.{digits}f}"
+    one where it rounds to zero ("-0" would put a zero on one side of it). A value a float
+    holds a hair off a tie (151/200 - 68/100 as 7.4999999999999991 points) is its exact
+    value first, so it rounds as the rates it comes from do."""
+    text = f"{round(points, 9):+.{digits}f}"
     return text[1:] if float(text) == 0 else text
 
 

@@ -67,8 +67,10 @@ def differences(cells: dict[str, dict[str, Any]], base: str = "mem0") -> dict[st
                 continue
             b = Rate.of(cell)
             d, low, high = difference(a.successes, a.episodes, b.successes, b.episodes)
+            # (unrounded: a table rounds once, to whole points; 4 decimals first moved an
+            # end such as 0.654976 to 0.6550 and so to 66 where it is 65)
             out.setdefault(task, {})[spec] = {
-                "difference": round(d, 4), "ci95": [round(low, 4), round(high, 4)],
+                "difference": d, "ci95": [low, high],
                 "outside_noise": outside_noise(a.successes, a.episodes, b.successes, b.episodes)}
     return out
 
