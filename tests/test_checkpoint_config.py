@@ -30,8 +30,13 @@ def test_a_damaged_config_is_a_checkpoint_error_naming_it(tmp_path, text, messag
 def test_a_learned_policy_spec_is_checked_without_building_it(tmp_path):
     (tmp_path / "config.json").write_text(json.dumps(GOOD))
     assert read_config(tmp_path, "dp")["step"] == 10
-    checkpoint_check("dp")(f"{tmp_path}?execute=4")  # options aside
+    checkpoint_check("dp", "rmbench.policies.dp.config.DPConfig")(f"{tmp_path}?execute=4")
     check_policy(f"dp:{tmp_path}")
+    # its options, before anything runs: an unknown one, one without a value
+    with pytest.raises(ValueError, match=r"unknown option 'foo'; options: .*execute"):
+        check_policy(f"dp:{tmp_path}?foo=1")
+    with pytest.raises(ValueError, match=r"option execute='' is not a number"):
+        check_policy(f"dp:{tmp_path}?execute")
     with pytest.raises(CheckpointError, match="not a checkpoint"):
         check_policy(f"mem0:{tmp_path / 'missing'}")
     with pytest.raises(CheckpointError, match="is a 'dp' checkpoint, not 'act'"):

@@ -30,3 +30,54 @@ def test_quickstart_writes_videos_and_summary(tmp_path, capsys):
     assert summary["all_succeeded"]
     for row in summary["tasks"]:
         assert (tmp_path / f"{row['task']}_seed100000.mp4").stat().st_size > 1000
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    assert "Traceback" not in err
+    return err.splitlines()[-1]
+
+
+def test_bad_input_is_refused_before_anything_is_written(tmp_path, capsys):
+    """Each refusal is one line, before a folder is made or a user's files are touched."""
+    import importlib.util
+
+    out = tmp_path / "t"
+    assert main(["table", "--obs", "state", "--tasks", "put_back_block", "--policies", "dp",
+                 "--video", "first", "--out", str(out)]) == 2  # read hours in, checked now
+    assert "video must be first:K, failures or none" in _one_line(capsys)
+    assert main(["table", "--obs", "state", "--tasks", "put_back_block", "--policies", "dp",
+                 "--train-seeds", "abc", "--out", str(out)]) == 2
+    assert "--train-seeds takes whole numbers" in _one_line(capsys)
+    out.mkdir()
+    assert main(["table", "--obs", "state", "--tasks", "put_back_block", "--policies", "dp",
+                 "--report-only", "--out", str(out)]) == 2
+    assert "no table at" in _one_line(capsys) and not list(out.iterdir())
+    import pytest
+
+    with pytest.raises(SystemExit) as stop:  # (argparse's own refusal)
+        main(["serve", "--policy", "random", "--task", "put_back_block", "--port", "99999"])
+    assert stop.value.code == 2 and "99999 is above 65535" in _one_line(capsys)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "summary.json").write_text("{}")  # a user's file, not an evaluation's
+    assert main(["eval", "--task", "put_back_block", "--policy", "noop", "--episodes", "1",
+                 "--out", str(mine)]) == 2
+    assert "holds a summary but no run.json" in _one_line(capsys)
+    assert sorted(p.name for p in mine.iterdir()) == ["summary.json"]
+    notes = tmp_path / "notes"
+    notes.mkdir()
+    (notes / "notes.txt").write_text("mine")
+    assert main(["collect", "put_back_block", "--episodes", "1", "--out", str(notes)]) == 2
+    assert sorted(p.name for p in notes.iterdir()) == ["notes.txt"]  # (no lock left behind)
+    if importlib.util.find_spec("ray") is None:
+        for cmd in (["collect", "put_back_block", "--episodes", "1"],
+                    ["eval", "--task", "put_back_block", "--policy", "noop", "--episodes", "1"]):
+            assert main(cmd + ["--out", str(tmp_path / "ray"), "--backend", "ray"]) == 2
+            assert "needs Ray" in _one_line(capsys) and not (tmp_path / "ray").exists()
+
+
+def test_open_loop_refuses_a_policy_that_reads_the_simulator(dataset, capsys):
+    assert main(["open-loop", "--policy", "expert", "--dataset", str(dataset)]) == 2
+    assert "reads the simulator, which open-loop does not run" in _one_line(capsys)
+    assert main(["open-loop", "--policy", "random", "--dataset", str(dataset), "--json"]) == 0

@@ -54,6 +54,8 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     renamed onto ``path`` when the block ends without an error, removed otherwise.
     ``suffix`` keeps an extension a writer insists on (np.save appends ``.npy``)."""
     path = Path(path)
+    if path.is_dir():  # (the rename would fail after the work, naming the temporary file)
+        raise IsADirectoryError(f"{path} is a folder, not a file to write")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp{suffix}")
     try:

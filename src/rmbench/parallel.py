@@ -104,15 +104,26 @@ class _RayJob:
         return self.ray.get(self.ref)
 
 
+def check_backend(backend: str) -> None:
+    """A ValueError for an unknown backend, a RuntimeError for Ray where it is not installed:
+    said before a command writes anything."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if backend == "ray":
+        try:
+            import ray  # noqa: F401
+        except ImportError as err:
+            raise RuntimeError("--backend ray needs Ray: pip install 'rmbench[ray]'") from err
+
+
 class Ray:
     """Jobs spread over a Ray cluster (``RAY_ADDRESS``) or a local Ray instance. Results travel
     back to the caller, so workers need no shared file system."""
 
     def __init__(self, workers: int):
-        try:
-            import ray
-        except ImportError as err:
-            raise RuntimeError("--backend ray needs Ray: pip install 'rmbench[ray]'") from err
+        check_backend("ray")
+        import ray
+
         self.ray = ray
         self.window = 2 * workers
         if not ray.is_initialized():
@@ -143,8 +154,7 @@ def in_order(executor, calls: Iterable[tuple]) -> Iterator[tuple]:
 
 
 def make_executor(workers: int, backend: str = "local", on_close: Callable[[], None] | None = None):
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    check_backend(backend)
     if backend == "ray":
         return Ray(workers)
     return Inline(on_close) if workers == 1 else Pool(workers)

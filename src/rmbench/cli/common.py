@@ -9,9 +9,9 @@ def add_json(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print machine-readable JSON only")
 
 
-def whole(minimum: int):
-    """An argparse type: a whole number of at least ``minimum`` (argparse's one-line error
-    otherwise, before anything runs)."""
+def whole(minimum: int, maximum: int | None = None):
+    """An argparse type: a whole number of at least ``minimum`` (and at most ``maximum``;
+    argparse's one-line error otherwise, before anything runs)."""
     def parse(text: str) -> int:
         try:
             value = int(text)
@@ -19,7 +19,10 @@ def whole(minimum: int):
             raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
         if value < minimum:
             raise argparse.ArgumentTypeError(f"{value} is below {minimum}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"{value} is above {maximum}")
         return value
 
-    parse.__name__ = f"whole number >= {minimum}"
+    parse.__name__ = (f"whole number >= {minimum}" if maximum is None
+                      else f"whole number in [{minimum}, {maximum}]")
     return parse

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from rmbench.cli.common import add_json
+from rmbench.cli.common import add_json, whole
 from rmbench.seeds import SPLITS
 from rmbench.suite.recipes import add_recipe_arguments
 
@@ -101,7 +101,10 @@ def cmd_table(args) -> int:
     tasks = ([t.name for t in ordered()] if args.tasks == "all"
              else [t.strip() for t in args.tasks.split(",") if t.strip()])
     policies = [p.strip() for p in (args.policies or ",".join(ALL_POLICIES)).split(",") if p.strip()]
-    seeds = [int(s) for s in args.train_seeds.split(",") if s.strip()]
+    try:
+        seeds = [int(s) for s in args.train_seeds.split(",") if s.strip()]
+    except ValueError:
+        seeds = []
     if not seeds or min(seeds) < 0:
         raise ValueError(f"--train-seeds takes whole numbers >= 0, got {args.train_seeds!r}")
     policies = [with_seed(p, s) for p in policies for s in seeds]
@@ -112,8 +115,9 @@ def cmd_table(args) -> int:
     if args.report_only:
         # a table built a few cells at a time (calls narrowed with --tasks and --policies)
         # is reported whole from what its folder holds
-        if not out.is_dir():
-            raise ValueError(f"no table at {out} (--report-only runs nothing)")
+        if not out.is_dir() or not any((out / t).is_dir() for t in plan.tasks):
+            raise ValueError(f"no table at {out}: no folder of {', '.join(plan.tasks)} "
+                             f"(--report-only runs nothing)")
         stages.check_data(plan, out)
         failed = {}
     else:
@@ -279,7 +283,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--policy", required=True, help="policy spec, e.g. random or replay:DATASET")
     p.add_argument("--task", required=True, help="the task the policy acts in")
     p.add_argument("--host", default="127.0.0.1", help="bind address (default: this machine only)")
-    p.add_argument("--port", type=int, default=8000)
+    p.add_argument("--port", type=whole(0, 65535), default=8000,
+                   help="TCP port (default 8000; 0: any free one)")
     p.add_argument("--max-connections", type=int, default=4,
                    help="clients served at once; more are refused (default 4)")
     p.add_argument("--idle-timeout", type=float, default=300.0, metavar="SECONDS",

@@ -7,7 +7,7 @@ import json
 from dataclasses import replace
 from typing import Any
 
-from rmbench.cli.common import add_json
+from rmbench.cli.common import add_json, whole
 
 
 def run_training(policy: str, dataset: str, out: str, *, steps: int, batch_size: int, device: str,
@@ -78,6 +78,6 @@ def add_parsers(sub) -> None:
                         "full run would write, for the planner's cost, in a new --out")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE",
                    help="override a config field, VALUE as JSON (e.g. --set dim=64)")
-    p.add_argument("--workers", type=int, default=0, help="data-loading processes")
+    p.add_argument("--workers", type=whole(0), default=0, help="data-loading processes")
     add_json(p)
     p.set_defaults(func=cmd_train)

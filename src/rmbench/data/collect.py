@@ -19,7 +19,7 @@ from rmbench.data import layout as L
 from rmbench.data.record import SEARCH_MODES, EpisodeRecord, Recorder
 from rmbench.data.writer import DatasetWriter
 from rmbench.envs.noise import NoiseSpec
-from rmbench.parallel import BACKENDS, make_executor
+from rmbench.parallel import check_backend, make_executor
 from rmbench.seeds import TRAIN_SEED_END, check_training_seed
 from rmbench.sim.station import ALL_CAMERAS, StationConfig
 from rmbench.tasks import get_task
@@ -59,8 +59,7 @@ class CollectConfig:
             raise ValueError(f"workers must be at least 1, got {self.workers}")
         if self.search not in SEARCH_MODES:
             raise ValueError(f"search must be one of {SEARCH_MODES}, got {self.search!r}")
-        if self.backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        check_backend(self.backend)  # (Ray missing: said before anything is written)
         unknown = sorted(set(self.cameras) - set(ALL_CAMERAS))
         if unknown:
             raise ValueError(f"unknown camera(s) {unknown}; cameras: {list(ALL_CAMERAS)}")

@@ -41,7 +41,7 @@ from rmbench.data.record import EpisodeRecord, ImageStats, ReplayMismatch, execu
 from rmbench.data.writer import DatasetError, DatasetWriter
 from rmbench.envs.noise import NoiseSpec, perturber
 from rmbench.envs.registration import make
-from rmbench.parallel import in_order, make_executor
+from rmbench.parallel import check_backend, in_order, make_executor
 from rmbench.sim import robot
 from rmbench.sim.fixtures import StaticPiece
 from rmbench.sim.objects import FreePiece
@@ -241,6 +241,7 @@ def copy_layouts(source: str | Path, out: str | Path, copies: int, reach: float,
                          f"and {reach}")
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
+    check_backend(backend)
     src = Dataset(source)
     if L.root_path(out).resolve() == src.root.resolve():
         raise DatasetError(f"--out {out} is the source dataset; write the copies elsewhere")

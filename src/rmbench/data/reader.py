@@ -174,7 +174,9 @@ class Dataset:
     def __init__(self, root: str | Path):
         self.root = L.root_path(root)
         if not self.root.is_dir():
-            raise DatasetError(f"{self.root}: no such dataset folder")
+            raise DatasetError(f"{self.root}: " + ("a file, not a dataset folder"
+                                                   if self.root.exists() else
+                                                   "no such dataset folder"))
         self.info = check_info(read_json(self.root / L.INFO), self.root / L.INFO)
         self.rmbench = read_json(self.root / L.RMBENCH)
         if not isinstance(self.rmbench, dict) or not isinstance(self.rmbench.get("task"), str):

@@ -134,6 +134,8 @@ class DatasetWriter:
             self._open(overwrite)
         except BaseException:
             self._lock.close()
+            if not (self.root / L.RMBENCH).exists():  # (refused: leave a user's folder as it was)
+                (self.root / WRITING).unlink(missing_ok=True)
             raise
 
     def _open(self, overwrite: bool) -> None:

@@ -37,7 +37,7 @@ from rmbench.eval.seeds import verified_seeds
 from rmbench.eval.worker import close_worker, episodes_job, policy_batches
 from rmbench.files import read_json_object, write_atomic, write_json
 from rmbench.identity import differences
-from rmbench.parallel import BACKENDS, in_order, make_executor
+from rmbench.parallel import check_backend, in_order, make_executor
 from rmbench.policies.registry import check_policy, env_options, parse_spec
 from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
@@ -48,6 +48,19 @@ log = logging.getLogger(__name__)
 
 class EvalError(ValueError):
     pass
+
+
+def keeps_video(video: str, index: int, success: bool | None) -> bool:
+    """Under the ``--video`` rule ``video`` (first:K, failures or none), keep a video of the
+    ``index``-th episode? (``success`` None: before it runs.) A ValueError for another rule."""
+    if video == "none":
+        return False
+    if video == "failures":
+        return success is None or not success
+    m = re.fullmatch(r"first:(\d+)", video)
+    if not m:
+        raise ValueError(f"video must be first:K, failures or none, got {video!r}")
+    return index < int(m.group(1))
 
 
 @dataclass(frozen=True)
@@ -88,8 +101,7 @@ class EvalConfig:
         parse_spec(self.policy)  # unknown policy: one line listing the known ones
         if self.episodes < 1 or self.workers < 1 or self.batch < 1 or self.seed < 0:
             raise ValueError("episodes, workers and batch must be >= 1 and seed >= 0")
-        if self.backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        check_backend(self.backend)  # (Ray missing: said before anything is written)
         if self.instructions not in ("seen", "unseen"):
             raise ValueError(f"instructions must be 'seen' or 'unseen', got {self.instructions!r}")
         if self.split not in SPLITS:
@@ -100,14 +112,7 @@ class EvalConfig:
 
     def video_rule(self, index: int, success: bool | None) -> bool:
         """Keep a video of the ``index``-th episode? (``success`` None: before it runs.)"""
-        if self.video == "none":
-            return False
-        if self.video == "failures":
-            return success is None or not success
-        m = re.fullmatch(r"first:(\d+)", self.video)
-        if not m:
-            raise ValueError(f"video must be first:K, failures or none, got {self.video!r}")
-        return index < int(m.group(1))
+        return keeps_video(self.video, index, success)
 
     def identity(self) -> dict[str, Any]:
         ident = {"policy": self.policy, "seed": self.seed, "episodes": self.episodes,
@@ -183,6 +188,9 @@ def _check_identity(out: Path, cfg: EvalConfig) -> None:
     says other arguments is refused while any episode is recorded under it, and taken over
     when none is (a run that stopped before its first episode, on a bad checkpoint say)."""
     path = out / "run.json"
+    if not path.exists() and any((out / f).exists() for f in ("summary.json", "summary.md")):
+        raise EvalError(f"{out} holds a summary but no run.json: not an rmbench evaluation "
+                        f"folder, whose files this one would overwrite; use another --out")
     if path.exists():
         saved, asked = read_json_object(path), cfg.identity()
         what = differences({**saved, "policy": _placed(saved.get("policy"))},

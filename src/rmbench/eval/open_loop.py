@@ -16,18 +16,27 @@ import numpy as np
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset
-from rmbench.policies.registry import make_policy, policy_cameras
+from rmbench.envs.registration import make
+from rmbench.policies.registry import env_options, make_policy, policy_cameras, reads_simulator
 
 
 def open_loop_error(spec: str, dataset: str, episodes: list[int]) -> dict[str, Any]:
     """Mean absolute difference (joints in rad, grippers in the action space's units) between
     the policy's action and the recorded one at every frame of ``episodes``, and the same for holding still.
-    The policy is built without an environment, as for ``rmbench serve``."""
+    The policy is built for an env of the dataset's task that renders nothing (the recorded
+    frames are what it reads), so one that reads the simulator is refused."""
     ds = Dataset(dataset)
     bad = [e for e in episodes if not 0 <= e < ds.num_episodes]
     if bad:
         raise ValueError(f"episode {bad[0]} is not in {dataset} ({ds.num_episodes} episodes)")
-    policy = make_policy(spec, None)
+    if reads_simulator(spec):
+        raise ValueError(f"{spec} reads the simulator, which open-loop does not run: it feeds "
+                         f"a policy recorded observations alone")
+    env = make(ds.task, **{**env_options(spec), "render": False})
+    try:
+        policy = make_policy(spec, env)
+    finally:
+        env.close()
     # built without an env, a learned policy cannot check its task against one: against the
     # demonstrations' here (its checkpoint's description names the task it learned)
     trained = (getattr(policy, "describe", None) or {}).get("task")

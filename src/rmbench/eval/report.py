@@ -68,7 +68,10 @@ def load_runs(folders: list[str | Path], labels: list[str] | None = None) -> lis
     for k, folder in enumerate(folders):
         path = Path(folder) / "summary.json"
         if not path.exists():
-            raise ValueError(f"{folder}: no summary.json (not an `rmbench eval` folder)")
+            raise ValueError(f"{folder}: no summary.json yet (an evaluation running or "
+                             f"stopped: run its `rmbench eval` again to finish it)"
+                             if (Path(folder) / "run.json").exists() else
+                             f"{folder}: no summary.json (not an `rmbench eval` folder)")
         summary = read_json_object(path, ("policy", "tasks"))
         videos = {}
         for task in summary["tasks"]:

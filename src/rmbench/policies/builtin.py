@@ -107,13 +107,20 @@ def _checkpoint_config(arg: str | None) -> dict[str, Any] | None:
         return None
 
 
-def checkpoint_check(policy: str):
+def checkpoint_check(policy: str, config: str, extra: tuple[str, ...] = ()):
     """A learned policy's ``check``: its checkpoint's config.json is there, readable and of
-    that policy (``checkpoint.read_config``'s one-line errors)."""
+    that policy (``checkpoint.read_config``'s one-line errors), and its options
+    (``CKPT?name=value``) are the policy's: ``extra`` and the inference fields of its
+    ``config`` class (a module path), with values it reads."""
     def check(arg: str | None) -> None:
+        from importlib import import_module
+
         from rmbench.policies.checkpoint import read_config
+        from rmbench.policies.config import parse_argument
 
         read_config(split_argument(arg)[0], policy)
+        module, name = config.rsplit(".", 1)
+        parse_argument(arg or "", getattr(import_module(module), name), extra)
 
     return check
 
@@ -158,7 +165,9 @@ def _mem0_reads_simulator(arg: str | None) -> bool:
 
 register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&execute=N&flow_steps=N]",
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
-                reads_simulator=_mem0_reads_simulator, check=checkpoint_check("mem0"))(_mem0)
+                reads_simulator=_mem0_reads_simulator,
+                check=checkpoint_check("mem0", "rmbench.policies.mem0.config.Mem0Config",
+                                       ("ablation",)))(_mem0)
 
 
 def _dp(arg, env):
@@ -175,7 +184,7 @@ def _act(arg, env):
 
 register_policy("dp", "Diffusion Policy from a checkpoint: dp:CKPT[?execute=N&ddim_steps=N]",
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
-                check=checkpoint_check("dp"))(_dp)
+                check=checkpoint_check("dp", "rmbench.policies.dp.config.DPConfig"))(_dp)
 register_policy("act", "ACT from a checkpoint: act:CKPT[?temporal_ensemble=M&execute=N]",
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
-                check=checkpoint_check("act"))(_act)
+                check=checkpoint_check("act", "rmbench.policies.act.config.ACTConfig"))(_act)

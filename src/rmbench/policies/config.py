@@ -98,7 +98,7 @@ def parse_argument(arg: str, config_cls: type[PolicyConfig], extra: tuple[str, .
     known = tuple(extra) + tuple(config_cls.INFERENCE_FIELDS)
     overrides: dict[str, Any] = {}
     options: dict[str, str] = {}
-    for key, value in parse_qsl(query):
+    for key, value in parse_qsl(query, keep_blank_values=True):  # ("?execute" said, not dropped)
         if key not in known:
             raise ValueError(f"unknown option {key!r}; options: {', '.join(known)}")
         if key in extra:

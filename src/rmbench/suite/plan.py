@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.envs.noise import NoiseSpec
+from rmbench.eval.harness import keeps_video
 from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered
@@ -261,6 +262,7 @@ class Plan:
         if self.split not in SPLITS:
             raise ValueError(f"split must be one of {', '.join(SPLITS)}, got {self.split!r}")
         NoiseSpec(self.noise_kind, self.noise)  # a bad kind or sigma: one line
+        keeps_video(self.video, 0, True)  # (read by the evaluations, hours in: checked now)
         check_device(self.device)
         check_sets(self.sets)
         for items in self.task_sets.values():
