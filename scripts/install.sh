@@ -4,7 +4,7 @@
 #     when any is missing;
 #  2. create .venv at the repository root;
 #  3. install the CPU build of torch first (never a CUDA build), then rmbench with its test,
-#     training, text-encoder and planner-backend extras.
+#     training, text-encoder, ImageNet-backbone and planner-backend extras.
 # Packages come from pip's configured index (pip config, PIP_INDEX_URL, ...). torch alone can
 # come from another: RMBENCH_TORCH_INDEX=URL (docs/getting-started.md).
 set -euo pipefail

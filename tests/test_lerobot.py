@@ -59,6 +59,40 @@ def test_a_lerobot_checkpoint_names_the_observation_it_reads(tmp_path):
     assert checkpoint_cameras(ckpt("observation.state", "observation.environment_state")) == ()
 
 
+def test_a_spec_that_is_no_lerobot_checkpoint_is_refused_before_anything_runs(tmp_path):
+    import importlib.util
+
+    from rmbench.policies.registry import check_policy
+
+    config = tmp_path / "config.json"
+    for text, said in (("{bad", r"config\.json: unreadable"),
+                       ("[1]", r"config\.json: not a LeRobot policy config"),
+                       (json.dumps({"format": 1, "policy": "mem0", "config": {}}),
+                        r"not a LeRobot policy config .* mem0:, dp: or act:")):
+        config.write_text(text)
+        with pytest.raises(ValueError, match=said):
+            check_policy(f"lerobot:{tmp_path}")
+    config.write_text(json.dumps({"type": "act", "input_features": {}}))
+    if importlib.util.find_spec("lerobot") is None:
+        with pytest.raises(RuntimeError, match="LeRobot is not installed here"):
+            check_policy(f"lerobot:{tmp_path}")
+
+
+def test_a_served_copy_of_a_lerobot_policy_keeps_its_own_temporal_ensemble():
+    """LeRobot's ACT clears its temporal ensembler in place at reset: copies for the server's
+    connections must not share it."""
+    import types
+
+    from rmbench.lerobot.policy import LeRobotPolicy
+
+    policy = object.__new__(LeRobotPolicy)
+    policy.policy = types.SimpleNamespace(temporal_ensembler=types.SimpleNamespace(sums=[1]))
+    other = policy.fork()
+    assert other.policy is not policy.policy
+    assert other.policy.temporal_ensembler is not policy.policy.temporal_ensembler
+    assert other.policy.temporal_ensembler.sums == [1]
+
+
 @pytest.mark.slow
 def test_lerobot_trains_and_evaluates_on_rmbench(tmp_path):
     """Builds LeRobot's environment from the package index (minutes the first time)."""

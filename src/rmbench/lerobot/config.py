@@ -33,7 +33,8 @@ from rmbench.tasks import get_task
 class RMBenchEnv(EnvConfig):
     task: str | None = "put_back_block"
     fps: int = 20  # rmbench's control rate
-    obs_type: str = "pixels_agent_pos"
+    # every dataset rmbench collects holds the state vector, which LeRobot's policies read
+    obs_type: str = "pixels_environment_state_agent_pos"
     cameras: str = "head,left_wrist,right_wrist"  # comma-separated, as on the command line
     observation_width: int = 320
     observation_height: int = 240

@@ -27,12 +27,32 @@ STATE_KEY, IMAGE_PREFIX = "observation.environment_state", "observation.images."
 
 
 def checkpoint_inputs(path: str | Path) -> dict[str, Any]:
-    """The checkpoint's input features (``config.json``), or a one-line error."""
+    """The checkpoint's input features (``config.json``), or a one-line error naming it."""
     config = Path(path) / "config.json"
     if not config.is_file():
         raise ValueError(f"{path}: no config.json (a LeRobot checkpoint folder: "
                          f"OUTPUT/checkpoints/last/pretrained_model)")
-    return json.loads(config.read_text()).get("input_features", {})
+    try:
+        saved = json.loads(config.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"{config}: unreadable ({err})") from None
+    if not (isinstance(saved, dict) and isinstance(saved.get("type"), str)
+            and isinstance(saved.get("input_features"), dict)):
+        raise ValueError(f"{config}: not a LeRobot policy config (its 'type' and "
+                         f"'input_features'); an rmbench checkpoint is evaluated as "
+                         f"mem0:, dp: or act:")
+    return saved["input_features"]
+
+
+def check(path: str | None) -> None:
+    """The spec's check, before an evaluation writes anything: a LeRobot checkpoint folder,
+    and LeRobot installed to build it."""
+    checkpoint_inputs(path or "")
+    import importlib.util
+
+    if importlib.util.find_spec("lerobot") is None:
+        raise RuntimeError("lerobot: LeRobot is not installed here: evaluate LeRobot "
+                           "checkpoints in LeRobot's environment (docs/guides/lerobot.md)")
 
 
 def obs_type(path: str | None) -> str:
@@ -80,10 +100,14 @@ class LeRobotPolicy(BasePolicy):
     def fork(self) -> LeRobotPolicy:
         """A copy for another connection of the policy server: the same weights, its own
         episode state. LeRobot keeps a policy's action queues on the policy module, and its
-        ``reset`` binds new ones, so a shallow copy of the module is enough (ACT's temporal
-        ensembler, when configured, is one object the copies share)."""
+        ``reset`` binds new ones, so a shallow copy of the module holds its own queues; ACT's
+        temporal ensembler, when configured, is cleared in place by ``reset``, so each copy
+        gets its own."""
         other = copy.copy(self)
         other.policy = copy.copy(self.policy)
+        ensembler = getattr(self.policy, "temporal_ensembler", None)
+        if ensembler is not None:
+            other.policy.temporal_ensembler = copy.deepcopy(ensembler)
         return other
 
     def act(self, observation: dict[str, Any]) -> np.ndarray:
@@ -105,4 +129,5 @@ class LeRobotPolicy(BasePolicy):
 
 register_policy("lerobot", "a LeRobot checkpoint (lerobot-train's pretrained_model folder; "
                 "needs LeRobot installed): lerobot:PATH", needs_argument=True,
-                obs_type=obs_type, cameras=checkpoint_cameras)(lambda arg, env: LeRobotPolicy(arg))
+                obs_type=obs_type, cameras=checkpoint_cameras,
+                check=check)(lambda arg, env: LeRobotPolicy(arg))
