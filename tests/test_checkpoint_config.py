@@ -53,3 +53,18 @@ def test_weights_of_another_shape_name_the_tensor(tmp_path):
     with pytest.raises(CheckpointError, match=r"weight is \(4, 3\), the model's \(5, 3\) "
                                               r"\(2 tensors of other shapes\)"):
         load_weights(tmp_path, torch.nn.Linear(3, 5), 2)
+
+
+def test_a_config_takes_numpy_numbers_as_their_builtin_types_and_refuses_other_types():
+    import numpy as np
+
+    from rmbench.policies.act.config import ACTConfig
+
+    cfg = ACTConfig(dim=np.int64(256), lr=np.float64(1e-4))
+    assert type(cfg.dim) is int and type(cfg.lr) is float and cfg.dim == 256
+    assert ACTConfig(lr=0).lr == 0.0  # (JSON writes 0.0 as 0)
+    for bad, said in (({"dim": True}, "dim must be int, got bool"),
+                      ({"dim": 2.0}, "dim must be int, got float"),
+                      ({"dim": "x"}, "dim must be int, got str")):
+        with pytest.raises(ValueError, match=said):
+            ACTConfig(**bad)

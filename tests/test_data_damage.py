@@ -41,8 +41,13 @@ def test_a_skipped_seed_is_kept_before_the_next_commit(copied):
         w.skip(99, "the expert failed")
         saved = json.loads((copied / L.RMBENCH).read_text())["skipped"]
     finally:
-        w.close()
+        w._lock.close()  # killed: no close(), no bookkeeping after the skip
     assert {"seed": 99, "reason": "the expert failed"} in saved
+    resumed = DatasetWriter(cfg.out, cfg.task, cfg.spec, cfg.identity())
+    try:  # the skip is known: the next seed is the one after it, as in a run never stopped
+        assert resumed.next_seed == 100 and resumed.skipped[-1]["seed"] == 99
+    finally:
+        resumed.close()
 
 
 def test_a_second_writer_of_a_folder_is_refused_while_the_first_writes(copied):

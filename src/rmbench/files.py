@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import logging
 import os
 import re
 from collections.abc import Iterator
@@ -41,6 +42,9 @@ def lock(path: str | Path) -> IO[str]:
         holder = f.read().strip()
         f.close()
         raise Locked(path, holder) from None
+    except OSError as err:  # a file system without locks (some network mounts): go on unlocked
+        logging.getLogger(__name__).warning("%s: not locked, the file system takes no locks "
+                                            "(%s)", path, err.strerror or err)
     f.seek(0)
     f.truncate()
     f.write(f"{os.getpid()}\n")

@@ -130,7 +130,11 @@ def collect(cfg: CollectConfig) -> CollectSummary:
                          f"{cfg.episodes} asked; ask for at least {start_episodes}")
     max_attempts = cfg.max_attempts or 10 * cfg.episodes + 20
     attempts = writer.num_episodes + len(writer.skipped)
-    executor = make_executor(cfg.workers, cfg.backend, on_close=_close_recorder)
+    try:
+        executor = make_executor(cfg.workers, cfg.backend, on_close=_close_recorder)
+    except BaseException:
+        writer.close()
+        raise
     window = executor.window
     pending: deque = deque()  # (seed, job), in seed order
     next_seed = writer.next_seed

@@ -262,7 +262,7 @@ def copy_layouts(source: str | Path, out: str | Path, copies: int, reach: float,
     start = writer.num_episodes
     try:
         first, first_copy = _resume_point(writer, copies)
-    except DatasetError:
+    except BaseException:
         writer.close()
         raise
     executor = make_executor(workers, backend, on_close=_close_copier)

@@ -133,9 +133,9 @@ class DatasetWriter:
         try:
             self._open(overwrite)
         except BaseException:
+            if not (self.root / L.RMBENCH).exists():  # (refused: leave a user's folder as it was;
+                (self.root / WRITING).unlink(missing_ok=True)  # unlinked while still held)
             self._lock.close()
-            if not (self.root / L.RMBENCH).exists():  # (refused: leave a user's folder as it was)
-                (self.root / WRITING).unlink(missing_ok=True)
             raise
 
     def _open(self, overwrite: bool) -> None:
@@ -301,8 +301,9 @@ class DatasetWriter:
                     raise DatasetError(f"{self.root} records another {L.ENV_STATE} layout than "
                                        f"{self.task.name}'s state_names now; --overwrite to "
                                        f"start over")
-        last_seed = self.episodes[-1]["rmbench/seed"] if self.episodes else -1
-        self.skipped = [s for s in skipped if s["seed"] < last_seed]
+        # seeds are decided in order, so every saved skip was decided (a skip after the last
+        # commit too: written as it was made)
+        self.skipped = list(skipped)
         removed = self._remove_uncommitted()
         if removed:
             log.warning("removed %d file(s) of an interrupted episode in %s", removed, self.root)

@@ -22,7 +22,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,25 +41,13 @@ from rmbench.policies.registry import check_policy, env_options, parse_spec
 from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
+from rmbench.video_rule import keeps_video
 
 log = logging.getLogger(__name__)
 
 
 class EvalError(ValueError):
     pass
-
-
-def keeps_video(video: str, index: int, success: bool | None) -> bool:
-    """Under the ``--video`` rule ``video`` (first:K, failures or none), keep a video of the
-    ``index``-th episode? (``success`` None: before it runs.) A ValueError for another rule."""
-    if video == "none":
-        return False
-    if video == "failures":
-        return success is None or not success
-    m = re.fullmatch(r"first:(\d+)", video)
-    if not m:
-        raise ValueError(f"video must be first:K, failures or none, got {video!r}")
-    return index < int(m.group(1))
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import functools
 import json
+import numbers
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any, ClassVar, get_type_hints
 from urllib.parse import parse_qsl
+
+import numpy as np
 
 SCALARS = (bool, int, float, str)
 
@@ -23,10 +26,18 @@ def _scalar_fields(cls: type) -> dict[str, type]:
     return {f.name: hints[f.name] for f in fields(cls) if hints.get(f.name) in SCALARS}
 
 
-def _of_type(value: Any, kind: type) -> bool:
-    if kind is float:  # (JSON writes 0.0 as 0)
-        return type(value) in (int, float)
-    return type(value) is kind
+def _as_type(value: Any, kind: type) -> Any:
+    """``value`` as the built-in ``kind`` where it is one (a numpy number too; an integer for
+    a float, as JSON writes 0.0 as 0; never a bool for a number), else None."""
+    if kind is bool:
+        return bool(value) if isinstance(value, bool | np.bool_) else None
+    if isinstance(value, bool | np.bool_):
+        return None
+    if kind is int:
+        return int(value) if isinstance(value, numbers.Integral) else None
+    if kind is float:
+        return float(value) if isinstance(value, numbers.Real) else None
+    return str(value) if isinstance(value, str) else None
 
 
 @dataclass(frozen=True)
@@ -42,9 +53,11 @@ class PolicyConfig:
         # not as whatever a later division or comparison raises
         for name, kind in _scalar_fields(type(self)).items():
             value = getattr(self, name)
-            if not _of_type(value, kind):
+            plain = _as_type(value, kind)
+            if plain is None:
                 raise ValueError(f"{name} must be {kind.__name__}, got {type(value).__name__} "
                                  f"{value!r:.40}")
+            object.__setattr__(self, name, plain)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

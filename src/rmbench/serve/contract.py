@@ -153,7 +153,8 @@ class Contract:
         instruction = msg.get("instruction", "")
         if not isinstance(instruction, str):
             raise WireError("a reset's instruction must be a string")
-        info = msg.get("task_info", {})
+        info = msg.get("task_info")
+        info = {} if info is None else info  # (null, as before, is none)
         if not isinstance(info, dict):
             raise WireError("a reset's task_info must be a map")
         for key, value in info.items():

@@ -31,11 +31,11 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.envs.noise import NoiseSpec
-from rmbench.eval.harness import keeps_video
 from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered
 from rmbench.training.device import check_device
+from rmbench.video_rule import keeps_video
 
 POLICY_NAMES = ("mem0", "dp", "act")
 # every column of the two tables: policies, then Mem-0's ablations

@@ -128,7 +128,7 @@ def resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: di
         return _resumed(out, state, model, opt, identity, config_defaults, data)
     except TrainingError:
         raise
-    except (KeyError, TypeError, ValueError, RuntimeError, json.JSONDecodeError) as err:
+    except (KeyError, TypeError, ValueError) as err:  # (a JSON error is a ValueError)
         # (a state that loads but is not what this run saves: keys missing, another model)
         raise TrainingError(f"{out / STATE}: not a state this training can resume from "
                             f"({type(err).__name__}: {str(err).splitlines()[0][:200]}); "
@@ -145,8 +145,13 @@ def _resumed(out: Path, state: dict, model, opt, identity: dict, config_defaults
         raise TrainingError(f"{out} holds a training run on other data (fingerprint "
                             f"{state['data']} there, {data} asked): a dataset collected with "
                             f"other arguments or episodes; use another --out")
-    model.load_state_dict(state["model"])
-    opt.load_state_dict(state["optimizer"])
+    try:
+        model.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+    except RuntimeError as err:  # (another model's tensors; a device's own errors pass)
+        raise TrainingError(f"{out / STATE}: not a state this training can resume from "
+                            f"(RuntimeError: {str(err).splitlines()[0][:200]}); use another "
+                            f"--out") from None
     torch.set_rng_state(state["rng"].cpu())
     if "cuda_rng" in state and torch.cuda.is_available():
         torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
