@@ -130,6 +130,33 @@ def test_resume_mid_batch_keeps_every_record_and_runs_the_rest(tmp_path):
     assert strip(again) == strip(full) and len({r["seed"] for r in again}) == 6
 
 
+def test_a_kill_mid_job_keeps_the_episodes_that_ended_and_the_rerun_is_the_same(tmp_path,
+                                                                               monkeypatch):
+    """A job of several batches run in this process keeps its records as its episodes end (in
+    the order a whole job writes them), so a run killed mid-job loses only the episodes still
+    playing; the re-run plays them and gives the uninterrupted run's records."""
+    import rmbench.eval.episode as episode
+
+    _, full = run(tmp_path, "whole", "test_scripted_batch", batch=2, episodes=8)
+    real, resets = episode._Episode.reset_policy, []
+
+    def killed_at_the_seventh_reset(self, policy, slot):
+        if isinstance(policy, ScriptedBatch):  # (not the seed search's expert)
+            resets.append(self.seed)
+            if len(resets) == 7:
+                raise KeyboardInterrupt
+        real(self, policy, slot)
+
+    monkeypatch.setattr(episode._Episode, "reset_policy", killed_at_the_seventh_reset)
+    with pytest.raises(KeyboardInterrupt):
+        run(tmp_path, "killed", "test_scripted_batch", batch=2, episodes=8)
+    kept = read_records(tmp_path / "killed" / TASK / "episodes.jsonl")
+    assert 0 < len(kept) < 8 and strip(kept) == strip(full)[:len(kept)]  # one job of 8 seeds
+    monkeypatch.setattr(episode._Episode, "reset_policy", real)
+    _, again = run(tmp_path, "killed", "test_scripted_batch", batch=2, episodes=8)
+    assert strip(again) == strip(full)
+
+
 # ---------------------------------------------------------------------------- Mem-0
 @pytest.fixture(scope="module")
 def state_ckpt(mn_dataset, tmp_path_factory):

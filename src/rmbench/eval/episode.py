@@ -156,7 +156,9 @@ def run_policy_episodes(envs: Sequence, policy, seeds: Sequence[int],
                         on_step: Callable[[int, int, dict], None] | None = None,
                         memory_reset: MemoryReset | None = None,
                         slots: int | None = None,
-                        positions: Sequence[int] | None = None) -> list[dict[str, Any]]:
+                        positions: Sequence[int] | None = None,
+                        on_record: Callable[[int, dict], None] | None = None
+                        ) -> list[dict[str, Any]]:
     """The records of ``seeds``' episodes, in seed order. A policy with ``act_batch`` plays
     them side by side in ``slots`` slots (default ``len(envs)``), ``seeds[k]`` in slot
     ``positions[k]`` (default k modulo the envs), after the earlier seeds of that slot, in
@@ -170,7 +172,8 @@ def run_policy_episodes(envs: Sequence, policy, seeds: Sequence[int],
     ``videos[k]``: keep ``seeds[k]``'s video (MP4 bytes in ``record["video"]``).
     ``on_step(seed, step, info)`` after every env step; ``memory_reset`` resets the policy's
     slot where the probe says, dropping what is left of its last chunk. An exception from
-    ``act_batch`` ends the episodes it was asked for."""
+    ``act_batch`` ends the episodes it was asked for. ``on_record(k, record)`` as
+    ``seeds[k]``'s episode ends (a caller in this process keeps each as it comes)."""
     if not envs:
         raise ValueError("no env to run episodes in")
     if not batches(policy):
@@ -197,8 +200,13 @@ def run_policy_episodes(envs: Sequence, policy, seeds: Sequence[int],
             if not ep.ended:
                 running[slot] = (k, ep)
                 return
-            records[k] = ep.record()
+            ended(k, ep)
         running[slot] = None
+
+    def ended(k: int, ep: _Episode) -> None:
+        records[k] = ep.record()
+        if on_record is not None:
+            on_record(k, records[k])
 
     for slot in range(slots):
         start(slot)
@@ -230,7 +238,7 @@ def run_policy_episodes(envs: Sequence, policy, seeds: Sequence[int],
                 ep.step(policy, slot, on_step and (lambda step, info, seed=seed:
                                                    on_step(seed, step, info)))
             if ep.ended:
-                records[k] = ep.record()
+                ended(k, ep)
                 start(slot)
     return [records[k] for k in range(len(seeds))]
 

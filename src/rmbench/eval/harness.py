@@ -36,7 +36,7 @@ from rmbench.eval.seeds import verified_seeds
 from rmbench.eval.worker import close_worker, episodes_job, policy_batches
 from rmbench.files import read_json_object, write_atomic, write_json
 from rmbench.identity import differences
-from rmbench.parallel import check_backend, in_order, make_executor
+from rmbench.parallel import Inline, check_backend, in_order, make_executor
 from rmbench.policies.registry import check_policy, env_options, parse_spec
 from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
@@ -299,30 +299,54 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
     n_todo = len(todo)
     size = job_size(cfg, task, len(todo), executor) if todo else 1
     jobs = [todo[k:k + size] for k in range(0, len(todo), size)]
-    calls = ((job, episodes_job, (task, cfg.policy, cfg.instructions, [s for _, s in job],
-                                  [cfg.video_rule(i, None) and probe is None for i, _ in job],
-                                  probe.spec if probe else None, cfg.batch,
-                                  [i for i, _ in job]))
-             for job in jobs)
     desc = f"{task} {cfg.policy}" + (f" memory reset {probe.spec}" if probe else "")
     bar = tqdm(total=len(seeds), initial=len(done), unit="ep", desc=desc,
                disable=not cfg.progress, dynamic_ncols=True)
     t0 = time.perf_counter()
+    kept: set[int] = set()  # the seeds (by place) whose records are in the file
+
+    def keep(i: int, rec: dict[str, Any]) -> None:
+        if i in kept:
+            return
+        video = rec.pop("video")
+        rec["video"] = None
+        if video is not None and cfg.video_rule(i, rec["success"]):
+            name = f"videos/seed-{rec['seed']}.mp4"
+            write_atomic(folder / name, video)
+            rec["video"] = name
+        f.write(json.dumps(rec) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+        kept.add(i)
+        records.append(rec)
+        bar.update(1)
+
+    def as_they_end(job: list[tuple[int, int]]):
+        """A job run in this process keeps its records as its episodes end, each once those
+        before it in the job have: the file's order is the one kept when a job returns
+        whole, and a run killed mid-job loses only its unfinished episodes, not the job."""
+        ended: dict[int, dict[str, Any]] = {}
+        first = [0]
+
+        def on_record(k: int, rec: dict[str, Any]) -> None:
+            ended[k] = rec
+            while first[0] in ended:
+                keep(job[first[0]][0], ended.pop(first[0]))
+                first[0] += 1
+
+        return on_record
+
+    here = isinstance(executor, Inline)  # (a worker process's records come back with its job)
+    calls = ((job, episodes_job, (task, cfg.policy, cfg.instructions, [s for _, s in job],
+                                  [cfg.video_rule(i, None) and probe is None for i, _ in job],
+                                  probe.spec if probe else None, cfg.batch,
+                                  [i for i, _ in job], as_they_end(job) if here else None))
+             for job in jobs)
     try:
         with open(path, "a", encoding="utf-8") as f:
             for job, recs in in_order(executor, calls):
                 for (i, _), rec in zip(job, recs, strict=True):
-                    video = rec.pop("video")
-                    rec["video"] = None
-                    if video is not None and cfg.video_rule(i, rec["success"]):
-                        name = f"videos/seed-{rec['seed']}.mp4"
-                        write_atomic(folder / name, video)
-                        rec["video"] = name
-                    f.write(json.dumps(rec) + "\n")
-                    f.flush()
-                    os.fsync(f.fileno())
-                    records.append(rec)
-                    bar.update(1)
+                    keep(i, rec)
                 bar.set_postfix(success=f"{sum(r['success'] for r in records)}/{len(records)}",
                                 refresh=False)
     finally:
@@ -333,8 +357,9 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
 
 
 # Batches a job holds: more seeds than slots keep the slots busy while episodes of other
-# lengths end (a freed slot takes the next seed), fewer lose less to a kill (a job's records
-# are written when it returns) and leave work for every worker.
+# lengths end (a freed slot takes the next seed), fewer lose less to a kill where a worker
+# process runs the job (its records come back when it returns; one in this process keeps
+# them as they end) and leave work for every worker.
 JOB_BATCHES = 4
 
 

@@ -8,6 +8,7 @@ the interface (``policies/base.py``), one env per slot.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from rmbench.envs.registration import make
@@ -41,12 +42,14 @@ def policy_batches(task: str, policy: str, instructions: str) -> bool:
 
 def episodes_job(task: str, policy: str, instructions: str, seeds: list[int],
                  videos: list[bool], memory_reset: str | None = None,
-                 batch: int = 1, positions: list[int] | None = None) -> list[dict]:
+                 batch: int = 1, positions: list[int] | None = None,
+                 on_record: Callable[[int, dict], None] | None = None) -> list[dict]:
     """The records of ``seeds``' episodes in seed order, up to ``batch`` side by side, seed k
     in slot ``positions[k]`` (its place among the task's seeds modulo ``batch``: the same in
     every job it could fall in). The policy is always asked for ``batch`` slots, however few
     seeds the job has (a resumed run's last ones), so what it computes does not depend on how
-    the seeds were split."""
+    the seeds were split. ``on_record``: ``run_policy_episodes``' (a job run in the caller's
+    process)."""
     _, made = _setup(task, policy, instructions)
     batch = batch if batches(made) else 1
     most = getattr(made, "max_batch", None)
@@ -58,7 +61,7 @@ def episodes_job(task: str, policy: str, instructions: str, seeds: list[int],
     envs, made = _setup(task, policy, instructions, max(positions, default=0) + 1)
     probe = MemoryReset.parse(memory_reset) if memory_reset else None
     return run_policy_episodes(envs, made, seeds, videos, memory_reset=probe, slots=batch,
-                               positions=positions)
+                               positions=positions, on_record=on_record)
 
 
 def episode_job(task: str, policy: str, instructions: str, seed: int, video: bool,
