@@ -21,7 +21,7 @@ ROOT = "rmbench"
 # is left out.
 LAYERS: list[set[str]] = [
     # utilities: they import only each other (video writes through files, parallel checks the source)
-    {"files", "identity", "seeds", "video", "source", "parallel", "machine"},
+    {"files", "identity", "seeds", "video", "video_rule", "source", "parallel", "machine"},
     {"sim"},  # MuJoCo station, robot, objects, rendering backend
     {"tasks"},  # task definitions over the simulator
     {"envs", "experts"},  # the gymnasium env, and the scripted experts beside it
