@@ -40,13 +40,20 @@ class Progress:
         self.last = ""  # the last grid shown, without its clock
         # each running job's part and the (time, fraction) it was seen at as it moved
         self.paces: dict[Job, tuple[str, deque[tuple[float, float]]]] = {}
+        self._drawing: dict[Job, tuple[str, float]] | None = None  # (while a grid is drawn)
 
     def job_progress(self, job: Job) -> tuple[str, float]:
         """A running job's part under way (a collection's: demos, copies or features) and how
-        far it has come (0-1)."""
+        far it has come (0-1); read once per grid drawn (its cells and lines ask it again)."""
+        if self._drawing is not None and job in self._drawing:
+            return self._drawing[job]
         if job.kind == "collect":
-            return stages.data_progress(self.plan, self.out, job.task)
-        return job.kind, stages.fraction(self.plan, self.out, job.kind, job.task, job.spec)
+            got = stages.data_progress(self.plan, self.out, job.task)
+        else:
+            got = job.kind, stages.fraction(self.plan, self.out, job.kind, job.task, job.spec)
+        if self._drawing is not None:
+            self._drawing[job] = got
+        return got
 
     def left_s(self, job: Job, part: str, done: float) -> float | None:
         """Seconds ``job`` has left of ``part`` at its pace over the last ``pace_window_s``
@@ -106,6 +113,13 @@ class Progress:
 
     def render(self, running: set[Job], failed: dict[Job, str]) -> str:
         """The grid, without the clock."""
+        self._drawing = {}
+        try:
+            return self._render(running, failed)
+        finally:
+            self._drawing = None
+
+    def _render(self, running: set[Job], failed: dict[Job, str]) -> str:
         cells = self.plan.cells()
         specs = list(self.plan.policies)
         grid = {(t, s): self.cell(t, s, running, failed) for t, s in cells}

@@ -144,11 +144,10 @@ def data_progress(plan: Plan, out: Path, task: str) -> tuple[str, float]:
     if demos < 1:
         return "demos", demos
     data = plan.train_data_dir(out, task)
-    if plan.rendered_copies and copies_done(plan, out, task) is None:
-        copies = read_json(data / "meta" / "info.json", {}).get("total_episodes", 0)
-        # (a copy out of the arms' reach is left out: this part may end short of 100%)
-        return "copies", min(1.0, copies / (plan.demos * (plan.rendered_copies + 1)))
     episodes = read_json(data / "meta" / "info.json", {}).get("total_episodes", 0)
+    if plan.rendered_copies and copies_done(plan, out, task) is None:
+        # (a copy out of the arms' reach is left out: this part may end short of 100%)
+        return "copies", min(1.0, episodes / (plan.demos * (plan.rendered_copies + 1)))
     wanted = done = 0
     for spec in {trained_spec(s) for s in plan.policies}:
         c = plan.config(task, spec)
