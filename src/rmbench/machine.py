@@ -20,6 +20,10 @@ CPUINFO = Path("/proc/cpuinfo")
 VECTOR_ISAS = ("avx512f", "avx2", "avx", "sse4_2")
 
 
+# what sizes OpenMP's and the BLAS libraries' thread pools (torch reads them at its import)
+THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
 def usable_cores() -> int:
     """The cores this process may run on (its affinity: ``taskset``, a container's cpuset),
     which a job's threads and worker processes are sized by; ``os.cpu_count()`` counts the

@@ -18,7 +18,7 @@ from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 
 from rmbench import source
-from rmbench.machine import usable_cores
+from rmbench.machine import THREAD_VARS, usable_cores
 
 BACKENDS = ("local", "ray")
 
@@ -70,7 +70,7 @@ def _start_worker(parent: int, threads: int) -> None:
     threads for OpenMP/BLAS (torch reads this when a learned policy first imports it),
     instead of every worker taking all cores."""
     exit_with_parent(parent)
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    for var in THREAD_VARS:
         os.environ.setdefault(var, str(threads))
 
 

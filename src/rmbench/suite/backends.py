@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
+from rmbench.machine import THREAD_VARS
 from rmbench.suite.job import run_job, source_digest
 from rmbench.suite.plan import Plan
 from rmbench.suite.schedule import Job
@@ -38,8 +39,7 @@ class LocalJobs:
                "--out", str(out), "--kind", job.kind, "--task", job.task, "--spec", job.spec,
                "--threads", str(threads), "--digest", source_digest(),
                "--parent", str(os.getpid())]
-        env = {**os.environ, **{v: str(threads) for v in
-                                ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}}
+        env = {**os.environ, **{v: str(threads) for v in THREAD_VARS}}
         f = open(log, "a")  # (appended: a resumed job's log keeps its earlier runs)
         start = f.tell()  # where this run's lines begin
         self.running[job] = (subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env), f,
