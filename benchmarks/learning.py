@@ -52,7 +52,7 @@ import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.eval.episode import ENDINGS
 from rmbench.files import write_json
 from rmbench.machine import describe
-from rmbench.suite import runner, stages
+from rmbench.suite import cell_rows, data_stage, runner
 from rmbench.suite.plan import Plan
 from rmbench.suite.recipes import add_recipe_arguments, recipe_of
 from rmbench.tasks import get_task
@@ -112,13 +112,13 @@ def main(argv: list[str] | None = None) -> int:
     if failed:
         raise SystemExit("; ".join(f"{job.name}: {err}" for job, err in failed.items())
                          + " (a re-run resumes)")
-    rows = {spec: stages.cell_row(plan, out, task.name, spec) for _, spec in plan.cells()}
+    rows = {spec: cell_rows.cell_row(plan, out, task.name, spec) for _, spec in plan.cells()}
     command = "python benchmarks/learning.py " + " ".join(
         shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
     result = {"command": command, "task": task.name, "tmc": task.tmc, "obs": args.obs,
               "demos": args.demos, "steps": args.steps, "batch": args.batch, "set": args.set,
               "episodes": args.episodes, "noise": plan_noise(plan),
-              "dataset": stages.collect_stage(plan, out, task.name), "policies": rows,
+              "dataset": data_stage.collect_stage(plan, out, task.name), "policies": rows,
               "machine": {**describe(), "jobs": args.jobs,
                           "torch_threads": max(1, (os.cpu_count() or 1) // args.jobs)}}
     results_path.parent.mkdir(parents=True, exist_ok=True)

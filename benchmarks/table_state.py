@@ -19,7 +19,7 @@ data and task version.
 
 ``--seed N`` records the source's cells as training seed N of the cells already recorded
 (a recorded cell of one seed is seed 0), and the recorded cell becomes the pool of its seeds
-(``suite.stages.pooled_row``): so a seed evaluated in one folder joins one evaluated in
+(``suite.cell_rows.pooled_row``): so a seed evaluated in one folder joins one evaluated in
 another (a planner refit's seed 0, a table's seed 1). Recording seed N again replaces it. A
 pooled cell is replaced only seed by seed, never by a cell of one seed.
 
@@ -50,6 +50,7 @@ from pathlib import Path
 
 from rmbench.eval.chance import chance
 from rmbench.files import write_json
+from rmbench.suite.cell_rows import pooled_row
 from rmbench.suite.plan import split_seed, with_seed
 from rmbench.suite.records import (
     cell_record,
@@ -58,7 +59,6 @@ from rmbench.suite.records import (
     seed_records,
     stated_conditions,
 )
-from rmbench.suite.stages import pooled_row
 from rmbench.tasks.registry import recorded_gym_id
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -15,7 +15,17 @@ from rmbench.eval.chance import chance
 from rmbench.eval.intervals import wilson
 from rmbench.machine import describe, short
 from rmbench.policies.mem0.config import Mem0Config
-from rmbench.suite import backends, clock, runner, schedule, stages, tables
+from rmbench.suite import (
+    backends,
+    cell_rows,
+    clock,
+    data_stage,
+    runner,
+    schedule,
+    stages,
+    tables,
+    versions,
+)
 from rmbench.suite.plan import (
     Plan,
     applies,
@@ -460,7 +470,7 @@ def test_a_camera_tables_data_shows_the_part_under_way(tmp_path):
     episodes(copies, 6)  # of 4 x (1 + 2)
     assert show() == "copies 50%"
     episodes(copies, 12)
-    stages.copies_record(plan, tmp_path, "put_back_block").write_text(
+    plan.copies_record(tmp_path, "put_back_block").write_text(
         json.dumps({"source_episodes": 4}))
     cfg = plan.config("put_back_block", "mem0")
     folder = default_dir(copies, cfg.backbone, cfg.backbone_stride, tuple(cfg.image_size))
@@ -479,7 +489,7 @@ def test_a_job_spends_its_share_of_the_cores(tmp_path, monkeypatch):
     from rmbench.suite.job import run_job, source_digest
 
     seen = {}
-    monkeypatch.setattr(stages, "collect_stage", lambda *a, **kw: seen.update(collect=kw))
+    monkeypatch.setattr(data_stage, "collect_stage", lambda *a, **kw: seen.update(collect=kw))
     monkeypatch.setattr(stages, "eval_stage", lambda *a, **kw: seen.update(eval=kw))
     plan = Plan("state", ("observe_and_pickup",), ("mem0",)).to_dict()
     import torch
@@ -500,16 +510,16 @@ def test_the_collect_job_solves_the_layout_copies_the_trainings_read(dataset, tm
 
     plan = Plan("state", (TASK,), ("mem0", "dp"), demos=3, steps=2, batch=2, episodes=1,
                 sets=("layout_copies=2", "layout_shift=0.02"))
-    assert stages.layout_copy_sets(plan, TASK) == [(2, 0.02)]  # one set for both policies
+    assert data_stage.layout_copy_sets(plan, TASK) == [(2, 0.02)]  # one set for both policies
     shutil.copytree(dataset, plan.data_dir(tmp_path, TASK), ignore=shutil.ignore_patterns(".cache"))
-    assert stages.demos_collected(plan, tmp_path, TASK) and not stages.collected(plan, tmp_path, TASK)
+    assert data_stage.demos_collected(plan, tmp_path, TASK) and not data_stage.collected(plan, tmp_path, TASK)
     assert schedule.Job("collect", TASK) in schedule.plan_jobs(plan, tmp_path)
-    summary = stages.collect_stage(plan, tmp_path, TASK)
+    summary = data_stage.collect_stage(plan, tmp_path, TASK)
     assert summary["layout_copies_wall_s"] > 0
-    assert stages.collected(plan, tmp_path, TASK)
+    assert data_stage.collected(plan, tmp_path, TASK)
     assert schedule.Job("collect", TASK) not in schedule.plan_jobs(plan, tmp_path)
     # solved once: a second collect job finds them and adds no time
-    assert stages.collect_stage(plan, tmp_path, TASK)["layout_copies_wall_s"] == summary[
+    assert data_stage.collect_stage(plan, tmp_path, TASK)["layout_copies_wall_s"] == summary[
         "layout_copies_wall_s"]
 
 
@@ -522,7 +532,7 @@ def test_rendered_copies_are_the_training_data_with_their_features_encoded_once(
     from tests.conftest import DATA_TASK as TASK
 
     cams = ("head", "left_wrist", "right_wrist")
-    monkeypatch.setitem(stages.COLLECT_CAMERAS, "pixels", (cams, (64, 48)))
+    monkeypatch.setitem(data_stage.COLLECT_CAMERAS, "pixels", (cams, (64, 48)))
     plan = Plan("pixels", (TASK,), ("mem0", "dp"), demos=1, steps=2, batch=2, episodes=1,
                 sets=("backbone=efficientnet_lite0", "backbone_stride=16"),
                 rendered_copies=1, rendered_reach=0.02)
@@ -533,11 +543,11 @@ def test_rendered_copies_are_the_training_data_with_their_features_encoded_once(
     assert plan.eval_dir(tmp_path, TASK, "mem0") != plain.eval_dir(tmp_path, TASK, "mem0")
     assert schedule.Job("collect", TASK) in schedule.plan_jobs(plan, tmp_path)
 
-    summary = stages.collect_stage(plan, tmp_path, TASK)
+    summary = data_stage.collect_stage(plan, tmp_path, TASK)
     assert summary["episodes"] == 1 and summary["rendered_copies"]["episodes"] == 2
-    (cache, wanted), = stages.feature_caches(plan, tmp_path, TASK)
+    (cache, wanted), = data_stage.feature_caches(plan, tmp_path, TASK)
     assert wanted == ([0, 1], sorted(cams)) and cache.missing(*wanted) == []
-    assert stages.collected(plan, tmp_path, TASK)
+    assert data_stage.collected(plan, tmp_path, TASK)
     assert schedule.Job("collect", TASK) not in schedule.plan_jobs(plan, tmp_path)
     encoded = {p: p.stat().st_mtime_ns for p in cache.dir.rglob("*.npy")}
     assert len(encoded) == 6
@@ -545,9 +555,9 @@ def test_rendered_copies_are_the_training_data_with_their_features_encoded_once(
     assert {p: p.stat().st_mtime_ns for p in cache.dir.rglob("*.npy")} == encoded
     assert json.loads((ckpt / "config.json").read_text())["step"] == 2
     # a killed rendering (no summary written) is finished by the next collect job
-    stages.copies_record(plan, tmp_path, TASK).unlink()
-    assert not stages.collected(plan, tmp_path, TASK)
-    assert stages.collect_stage(plan, tmp_path, TASK)["rendered_copies"]["episodes"] == 2
+    plan.copies_record(tmp_path, TASK).unlink()
+    assert not data_stage.collected(plan, tmp_path, TASK)
+    assert data_stage.collect_stage(plan, tmp_path, TASK)["rendered_copies"]["episodes"] == 2
 
     for bad in ({"rendered_copies": -1}, {"rendered_copies": 1, "rendered_reach": float("nan")}):
         with pytest.raises(ValueError, match="rendered copies"):
@@ -675,13 +685,13 @@ def test_training_seeds_are_columns_of_their_own_folders_pooled_into_one_cell(ca
                         "failure_reasons": {"timeout": 100 - k}, "train_wall_s": 10.0,
                         "eval_wall_s": 1.0, "machines": {"train": [], "eval": []},
                         "memory": "m"}
-    pooled = stages.pooled_row({0: row(30, 0.5), 1: row(20, 0.3)})
+    pooled = cell_rows.pooled_row({0: row(30, 0.5), 1: row(20, 0.3)})
     assert pooled["success_rate"] == 0.25 and pooled["episodes"] == 200
     assert pooled["mean_progress"] == 0.4 and pooled["endings"] == {"success": 50, "timeout": 150}
     assert pooled["success_ci95"] == pytest.approx(wilson(50, 200), abs=1e-4)  # pooled counts
     assert set(pooled["seeds"]) == {"0", "1"} and pooled["train_wall_s"] == 20.0
-    assert stages.pooled_row({0: row(30, 0.5), 1: None}) is None  # not until every seed is in
-    assert stages.pooled_row({0: row(30, 0.5)}) == row(30, 0.5)
+    assert cell_rows.pooled_row({0: row(30, 0.5), 1: None}) is None  # not until every seed is in
+    assert cell_rows.pooled_row({0: row(30, 0.5)}) == row(30, 0.5)
     assert cli(["table", "--obs", "state", "--tasks", "press_button", "--train-seeds", "-1",
                 "--report-only", "--out", "/nonexistent"]) != 0
     assert "--train-seeds takes whole numbers" in capsys.readouterr().err
@@ -693,7 +703,6 @@ def test_folders_of_another_task_version_are_moved_aside(tmp_path):
     by it, and what is of the current version stays."""
     import json
 
-    from rmbench.suite import stages
     from rmbench.tasks import get_task
 
     task, old = "swap_blocks", "rmbench/SwapBlocks-v0"
@@ -716,12 +725,12 @@ def test_folders_of_another_task_version_are_moved_aside(tmp_path):
     (evals / "version.json").write_text(json.dumps({"gym_id": get_task(task).gym_id}))
     assert stages.evaluated(plan, tmp_path, task, "mem0") == summary["tasks"][task]
     (evals / "version.json").write_text(json.dumps({"gym_id": old}))
-    moved = stages.retire_other_versions(plan, tmp_path, task)
+    moved = versions.retire_other_versions(plan, tmp_path, task)
     assert {a.name for a, _ in moved} == {"data", "timing.json", stale.name, evals.parent.name}
     assert all(b.name == f"{a.name}~SwapBlocks-v0" and b.exists() and not a.exists()
                for a, b in moved)
     assert (fresh / "config.json").exists()  # the current version's stays
-    assert stages.retire_other_versions(plan, tmp_path, task) == []  # nothing left to move
+    assert versions.retire_other_versions(plan, tmp_path, task) == []  # nothing left to move
 
 
 def test_a_table_refuses_another_tables_demonstrations(toy_table, tmp_path, capsys):
@@ -800,8 +809,8 @@ def test_a_dataset_of_another_task_version_is_moved_aside_not_refused(toy_table,
     record = json.loads(meta.read_text())
     meta.write_text(json.dumps({**record, "gym_id": "rmbench/ObserveAndPickup-v0"}))
     plan = Plan("state", ("observe_and_pickup",), ("dp",), demos=1)  # asks other data, too
-    stages.check_data(plan, out)  # not this version's: not read
-    moved = stages.retire_other_versions(plan, out, "observe_and_pickup")
+    data_stage.check_data(plan, out)  # not this version's: not read
+    moved = versions.retire_other_versions(plan, out, "observe_and_pickup")
     assert [a for a, _ in moved] == [data]
 
 

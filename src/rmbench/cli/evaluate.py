@@ -93,7 +93,7 @@ def cmd_table(args) -> int:
     import shlex
     from pathlib import Path
 
-    from rmbench.suite import runner, stages, tables
+    from rmbench.suite import data_stage, runner, tables
     from rmbench.suite.plan import ALL_POLICIES, Plan, with_seed
     from rmbench.suite.recipes import RECIPES, recipe_of
     from rmbench.tasks.registry import ordered
@@ -118,7 +118,7 @@ def cmd_table(args) -> int:
         if not out.is_dir() or not any((out / t).is_dir() for t in plan.tasks):
             raise ValueError(f"no table at {out}: no folder of {', '.join(plan.tasks)} "
                              f"(--report-only runs nothing)")
-        stages.check_data(plan, out)
+        data_stage.check_data(plan, out)
         failed = {}
     else:
         failed = runner.run(plan, out, jobs=args.jobs, backend=args.backend)

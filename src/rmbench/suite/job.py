@@ -14,7 +14,7 @@ from pathlib import Path
 
 from rmbench import source
 from rmbench.parallel import exit_with_parent
-from rmbench.suite import stages
+from rmbench.suite import data_stage, stages
 from rmbench.suite.plan import Plan
 
 KINDS = ("collect", "train", "eval")
@@ -27,7 +27,7 @@ def source_digest() -> str:
 
 def run_job(plan: dict, out: str, kind: str, task: str, spec: str, threads: int,
             digest: str, log: str | None = None) -> None:
-    """Run one stage (``stages``), refusing if this process imported other rmbench source than
+    """Run one stage (``data_stage``, ``stages``), refusing if this process imported other rmbench source than
     the table's runner (a table must not mix two versions of the code)."""
     if digest != source_digest():
         raise source.SourceChangedError(
@@ -47,7 +47,7 @@ def run_job(plan: dict, out: str, kind: str, task: str, spec: str, threads: int,
         # a job's share of the cores: torch threads in training, worker processes in
         # collection and evaluation (whose results do not depend on their number)
         if kind == "collect":
-            stages.collect_stage(p, out_dir, task, workers=max(1, threads))
+            data_stage.collect_stage(p, out_dir, task, workers=max(1, threads))
         elif kind == "train":
             stages.train_stage(p, out_dir, task, spec)
         else:

@@ -308,6 +308,12 @@ class Plan:
         the dataset of them and their copies."""
         return Path(out) / task / f"data{self._copies_tag()}"
 
+    def copies_record(self, out: Path, task: str) -> Path:
+        """Where a finished rendering of the rendered copies leaves its summary (beside their
+        dataset)."""
+        data = self.train_data_dir(out, task)
+        return data.with_name(data.name + ".json")
+
     def train_dir(self, out: Path, task: str, spec: str) -> Path:
         run = run_name(trained_spec(spec), self.steps, self.batch, self.sets_of(task))
         return Path(out) / task / "train" / bounded(f"{run}{self._copies_tag()}")

@@ -9,7 +9,7 @@ from collections import deque
 from pathlib import Path
 from typing import TextIO
 
-from rmbench.suite import stages
+from rmbench.suite import data_stage, stages
 from rmbench.suite.plan import Plan, trained_spec
 from rmbench.suite.schedule import Job
 
@@ -48,7 +48,7 @@ class Progress:
         if self._drawing is not None and job in self._drawing:
             return self._drawing[job]
         if job.kind == "collect":
-            got = stages.data_progress(self.plan, self.out, job.task)
+            got = data_stage.data_progress(self.plan, self.out, job.task)
         else:
             got = job.kind, stages.fraction(self.plan, self.out, job.kind, job.task, job.spec)
         if self._drawing is not None:

@@ -27,8 +27,8 @@ from rmbench.eval.intervals import wilson
 from rmbench.eval.report import Rate
 from rmbench.machine import describe
 from rmbench.policies.config import split_policy
+from rmbench.suite.cell_rows import result_row
 from rmbench.suite.clock import TIMING
-from rmbench.suite.stages import result_row
 from rmbench.tasks import get_task
 
 KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",

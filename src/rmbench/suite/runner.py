@@ -21,7 +21,7 @@ from pathlib import Path
 
 from rmbench.files import Locked, lock
 from rmbench.machine import usable_cores
-from rmbench.suite import clock, stages
+from rmbench.suite import clock, data_stage, versions
 from rmbench.suite.backends import LocalJobs, RayJobs
 from rmbench.suite.plan import Plan
 from rmbench.suite.progress import Progress
@@ -51,10 +51,10 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
          poll_s: float) -> dict[Job, str]:
     logs = out / "logs"
     for task in dict.fromkeys(t for t, _ in plan.cells()):
-        for old, new in stages.retire_other_versions(plan, out, task):
+        for old, new in versions.retire_other_versions(plan, out, task):
             progress.show(set(), {}, f"{old} was made on another version of {task}: "
                                      f"moved to {new.name}")
-    stages.check_data(plan, out)
+    data_stage.check_data(plan, out)
     needs = plan_jobs(plan, out)
     pool = (LocalJobs(max(1, usable_cores() // jobs)) if backend == "local"
             else RayJobs())
@@ -93,7 +93,7 @@ def _run(plan: Plan, out: Path, jobs: int, backend: str, progress: Progress,
                         progress.show(set(pool.running), failed, f"started {job.name}"
                                       + (f" on {slots} slots" if slots > 1 else ""))
                     move = resize(pool, jobs, [j for j in ready if j in pending],
-                                  lambda j: stages.data_progress(plan, out, j.task)[0])
+                                  lambda j: data_stage.data_progress(plan, out, j.task)[0])
                     if move is not None:
                         job, slots = move
                         why = ("no other job can start" if slots > pool.slots[job]

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from rmbench.suite import stages
+from rmbench.suite import data_stage, stages
 from rmbench.suite.plan import Plan, executor_spec, trained_spec
 
 PRIORITY = {"collect": 0, "eval": 1, "train": 2}  # within a task: unblock others, results early
@@ -52,7 +52,7 @@ def plan_jobs(plan: Plan, out: Path) -> dict[Job, tuple[Job, ...]]:
                 continue
             train = Job("train", task, trained_spec(spec))
             if fresh is None:
-                fresh = not stages.collected(plan, out, task)
+                fresh = not data_stage.collected(plan, out, task)
             if fresh:
                 needs.setdefault(collect, ())
             first = (collect,) if fresh else ()

@@ -20,10 +20,10 @@ from rmbench.eval.published import ablation_names
 from rmbench.eval.report import PUBLISHED, Rate, format_cell, published_source, table
 from rmbench.files import write_atomic, write_json
 from rmbench.machine import describe, short
+from rmbench.suite.cell_rows import cell_row, pooled_row
 from rmbench.suite.clock import DATA_WALLS, TIMING, read_json
 from rmbench.suite.plan import Plan, applies, split_seed
 from rmbench.suite.progress import column
-from rmbench.suite.stages import cell_row, pooled_row
 from rmbench.tasks import get_task
 
 POLICY_TABLE = ("mem0", "mem0:no_memory", "dp", "act")
