@@ -39,7 +39,7 @@ PYTHON = Path(sys.executable)
 SIDE = """
 import json, resource, sys
 from rmbench.eval import EvalConfig, evaluate
-from rmbench.eval.harness import read_records
+from rmbench.eval.records import read_records
 task, policy, out, episodes, batch, cache = json.loads(sys.argv[1])
 kw = {"batch": batch} if "batch" in EvalConfig.__dataclass_fields__ else {}
 cfg = EvalConfig((task,), policy, out, episodes=episodes, workers=1, video="none",

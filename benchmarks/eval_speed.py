@@ -24,7 +24,7 @@ import numpy as np
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.envs.registration import make
 from rmbench.eval import EvalConfig, evaluate
-from rmbench.eval.harness import read_records
+from rmbench.eval.records import read_records
 from rmbench.files import write_json
 from rmbench.machine import describe
 from rmbench.seeds import eval_seed_start

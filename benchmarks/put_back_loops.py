@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 
 from rmbench.eval.endings import ending, stage_at_end
-from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import share
+from rmbench.eval.records import read_records
 from rmbench.eval.rows import put_row
 from rmbench.tasks import get_task
 

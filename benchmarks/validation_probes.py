@@ -21,7 +21,7 @@ import json
 from pathlib import Path
 
 from rmbench.eval.endings import failures_by_stage
-from rmbench.eval.harness import read_records
+from rmbench.eval.records import read_records
 from rmbench.eval.rows import put_row
 from rmbench.policies.builtin import checkpoint_observation
 from rmbench.policies.config import split_policy

@@ -314,7 +314,7 @@ def test_a_run_saved_before_checkpoints_recorded_their_task_version_resumes(
 
 def test_baseline_through_the_evaluation_harness(ckpt, tmp_path):
     from rmbench.eval import EvalConfig, evaluate
-    from rmbench.eval.harness import read_records
+    from rmbench.eval.records import read_records
 
     name, path = ckpt
     # the env renders the cameras the checkpoint was trained on, read from its config.json
@@ -499,7 +499,7 @@ def test_state_checkpoint_round_trip_and_the_pixel_observation_error(state_ckpt)
 
 def test_state_baseline_through_the_evaluation_harness(state_ckpt, tmp_path):
     from rmbench.eval import EvalConfig, evaluate
-    from rmbench.eval.harness import read_records
+    from rmbench.eval.records import read_records
 
     name, path = state_ckpt
     assert env_options(f"{name}:{path}") == {"obs_type": "environment_state_agent_pos"}

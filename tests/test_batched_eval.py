@@ -7,8 +7,8 @@ import pytest
 from rmbench.envs.registration import make
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.episode import run_policy_episode, run_policy_episodes
-from rmbench.eval.harness import read_records
 from rmbench.eval.probe import MemoryReset
+from rmbench.eval.records import read_records
 from rmbench.policies import BasePolicy, register_policy
 from rmbench.policies.mem0.agent import Mem0Policy
 from tests.conftest import DATA_TASK as TASK

@@ -12,7 +12,7 @@ import pytest
 
 from rmbench.eval import EvalConfig, EvalError, evaluate
 from rmbench.eval.events import Events
-from rmbench.eval.harness import read_records
+from rmbench.eval.records import read_records
 from rmbench.policies import BasePolicy, UnknownPolicyError, register_policy
 from tests.conftest import DATA_TASK as TASK
 
@@ -150,7 +150,7 @@ def test_a_task_folder_of_another_task_version_is_not_resumed(tmp_path):
 
 
 def test_episodes_recorded_before_versions_were_kept_count_as_that_version(tmp_path):
-    from rmbench.eval.harness import _check_version
+    from rmbench.eval.folder import check_version
     from rmbench.tasks.registry import recorded_gym_id
 
     assert recorded_gym_id("battery_try", {}) == "rmbench/BatteryTry-v1"
@@ -159,9 +159,9 @@ def test_episodes_recorded_before_versions_were_kept_count_as_that_version(tmp_p
     (tmp_path / "episodes.jsonl").write_text('{"seed": 1, "success": false, "reason": "timeout", '
                                               '"progress": 0.0}\n')
     with pytest.raises(EvalError, match="holds episodes of rmbench/BatteryTry-v1, this"):
-        _check_version(tmp_path, "battery_try")
+        check_version(tmp_path, "battery_try")
     assert not (tmp_path / "version.json").exists()
-    _check_version(tmp_path, TASK)  # a task whose version then is the current one
+    check_version(tmp_path, TASK)  # a task whose version then is the current one
     assert (tmp_path / "version.json").exists()
 
 
@@ -330,19 +330,19 @@ def test_a_bad_policy_is_refused_before_anything_is_written(tmp_path):
 def test_a_checkpoint_spelled_another_way_resumes_its_evaluation(tmp_path, monkeypatch):
     """A table re-run with its OUT given as an absolute path, or through a link, names the
     same checkpoint folder in other words: its evaluations resume, they are not refused."""
-    from rmbench.eval.harness import _check_identity, _placed
+    from rmbench.eval.folder import check_identity, placed
 
     ckpt = tmp_path / "runs" / "ckpt"
     ckpt.mkdir(parents=True)
     (tmp_path / "link").symlink_to(tmp_path / "runs")
     monkeypatch.chdir(tmp_path)
-    assert _placed("mem0:runs/ckpt?ablation=no_key") == f"mem0:{ckpt}?ablation=no_key"
-    assert _placed("mem0:link/ckpt") == _placed(f"mem0:{ckpt}") == f"mem0:{ckpt}"
-    assert _placed("noop") == "noop" and _placed("mem0:no/such/folder") == "mem0:no/such/folder"
+    assert placed("mem0:runs/ckpt?ablation=no_key") == f"mem0:{ckpt}?ablation=no_key"
+    assert placed("mem0:link/ckpt") == placed(f"mem0:{ckpt}") == f"mem0:{ckpt}"
+    assert placed("noop") == "noop" and placed("mem0:no/such/folder") == "mem0:no/such/folder"
     out = tmp_path / "eval"
-    _check_identity(out, cfg(out, policy="mem0:runs/ckpt"))
+    check_identity(out, cfg(out, policy="mem0:runs/ckpt").identity())
     (out / TASK).mkdir(parents=True)
     (out / TASK / "episodes.jsonl").write_text('{"seed": 1}\n')  # an episode recorded
-    _check_identity(out, cfg(out, policy=f"mem0:{tmp_path}/link/ckpt"))
+    check_identity(out, cfg(out, policy=f"mem0:{tmp_path}/link/ckpt").identity())
     with pytest.raises(EvalError, match="other arguments"):
-        _check_identity(out, cfg(out, policy="mem0:runs/ckpt?ablation=no_key"))
+        check_identity(out, cfg(out, policy="mem0:runs/ckpt?ablation=no_key").identity())

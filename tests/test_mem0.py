@@ -466,7 +466,7 @@ def test_bad_checkpoints_give_one_line_errors(mn_ckpt, tmp_path):
 
 def test_mem0_through_the_evaluation_harness(mn_ckpt, tmp_path):
     from rmbench.eval import EvalConfig, evaluate
-    from rmbench.eval.harness import read_records
+    from rmbench.eval.records import read_records
 
     out = []
     for name in ("a", "b"):
@@ -650,7 +650,7 @@ def test_inference_runs_on_one_thread_whatever_the_process_has(mn_state_ckpt):
 
 def test_state_mem0_through_the_evaluation_harness(mn_state_ckpt, tmp_path):
     from rmbench.eval import EvalConfig, evaluate
-    from rmbench.eval.harness import read_records
+    from rmbench.eval.records import read_records
 
     spec = f"mem0:{mn_state_ckpt}?ablation=gt_classifier"
     assert env_options(spec) == {"obs_type": "environment_state_agent_pos"}

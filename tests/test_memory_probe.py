@@ -8,8 +8,8 @@ import pytest
 import rmbench
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.episode import run_policy_episode
-from rmbench.eval.harness import read_records
 from rmbench.eval.probe import MemoryReset, ResetTrigger, compare
+from rmbench.eval.records import read_records
 from rmbench.eval.seeds import verified_seeds
 from rmbench.policies import BasePolicy, make_policy, register_policy
 from rmbench.serve.server import PolicyServer

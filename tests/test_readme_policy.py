@@ -14,7 +14,7 @@ import pytest
 
 from rmbench.cli.main import main
 from rmbench.eval import worker
-from rmbench.eval.harness import read_records
+from rmbench.eval.records import read_records
 from rmbench.policies import registry
 from rmbench.sim.simulator import Simulator
 from tests.conftest import DATA_TASK as TASK

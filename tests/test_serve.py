@@ -5,7 +5,7 @@ import pytest
 from websockets.sync.client import connect
 
 from rmbench.eval import EvalConfig, evaluate
-from rmbench.eval.harness import read_records
+from rmbench.eval.records import read_records
 from rmbench.serve.server import PolicyServer
 from rmbench.serve.wire import PROTOCOL, WireError, pack, unpack
 from tests.conftest import DATA_TASK as TASK

@@ -10,7 +10,7 @@ from websockets.sync.client import connect
 from rmbench.envs.registration import make
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.episode import batches
-from rmbench.eval.harness import read_records
+from rmbench.eval.records import read_records
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.registry import POLICIES, make_policy, register_policy
 from rmbench.serve.client import BatchedRemotePolicy, RemotePolicy, open_remote

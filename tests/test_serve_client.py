@@ -9,7 +9,7 @@ import pytest
 from rmbench.envs.registration import make
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.episode import run_policy_episode
-from rmbench.eval.harness import read_records
+from rmbench.eval.records import read_records
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.registry import POLICIES, env_options, make_policy, register_policy
 from rmbench.serve.client import RemotePolicy

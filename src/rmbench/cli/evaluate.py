@@ -28,7 +28,7 @@ def cmd_eval(args) -> int:
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
-        from rmbench.eval.harness import drop_text, rate_text
+        from rmbench.eval.summary import drop_text, rate_text
 
         for task, r in summary["tasks"].items():
             print(f"{task:<20} {r['tmc']:<5} success {r['successes']:>3}/{r['episodes']:<3} "
@@ -70,7 +70,7 @@ def cmd_boundaries(args) -> int:
     from pathlib import Path
 
     from rmbench.eval.boundaries import VERDICTS, summarize
-    from rmbench.eval.harness import read_records
+    from rmbench.eval.records import read_records
 
     folder = Path(args.dir)
     tasks = sorted(p.parent.name for p in folder.glob("*/episodes.jsonl"))

@@ -23,31 +23,26 @@ import json
 import logging
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
-from rmbench.eval.episode import ENDINGS
-from rmbench.eval.intervals import format_difference, wilson
+from rmbench.eval.folder import check_identity, check_version
 from rmbench.eval.probe import MemoryReset, arm_file, arm_name, compare
+from rmbench.eval.records import EvalError, TaskResult, read_records, summarize
 from rmbench.eval.seeds import verified_seeds
+from rmbench.eval.summary import summary_markdown
 from rmbench.eval.worker import close_worker, episodes_job, policy_batches
-from rmbench.files import read_json_object, write_atomic, write_json
-from rmbench.identity import differences
+from rmbench.files import write_atomic, write_json
 from rmbench.parallel import Inline, check_backend, in_order, make_executor
 from rmbench.policies.registry import check_policy, env_options, parse_spec
 from rmbench.seeds import SPLITS
 from rmbench.tasks import get_task
-from rmbench.tasks.registry import recorded_gym_id
 from rmbench.video_rule import keeps_video
 
 log = logging.getLogger(__name__)
-
-
-class EvalError(ValueError):
-    pass
 
 
 @dataclass(frozen=True)
@@ -111,98 +106,6 @@ class EvalConfig:
         return ident
 
 
-# what every episode record holds (eval/episode.py), and what summaries and reports read
-RECORD_KEYS = ("seed", "success", "reason", "progress")
-
-
-def read_records(path: Path, repair: bool = False) -> list[dict]:
-    """The episode records of a JSONL file. Its last line may be torn (a writer killed
-    mid-line leaves no newline after it): that line is left out, and with ``repair`` (the
-    evaluation about to append) cut off the file. Any other line that is not a record is an
-    EvalError naming the file and line, and the file is left as it is: a damaged middle is
-    never cut away with the complete records after it."""
-    if not path.exists():
-        return []
-    data = path.read_bytes()
-    records, good = [], 0
-    lines = data.splitlines(keepends=True)
-    for n, line in enumerate(lines, 1):
-        if not line.endswith(b"\n") and n == len(lines):
-            break  # torn
-        try:
-            record = json.loads(line)
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            record = None
-        if not (isinstance(record, dict) and all(k in record for k in RECORD_KEYS)):
-            raise EvalError(f"{path}: line {n} is not an episode record (a record is one JSON "
-                            f"object a line with {', '.join(RECORD_KEYS)}); mend or move the "
-                            f"file") from None
-        records.append(record)
-        good += len(line)
-    if good < len(data) and repair:
-        log.warning("%s: dropping a torn last record (its writer was stopped)", path)
-        with open(path, "r+b") as f:
-            f.truncate(good)
-    return records
-
-
-@dataclass
-class TaskResult:
-    task: str
-    tmc: str
-    episodes: int
-    successes: int
-    success_rate: float
-    mean_progress: float
-    endings: dict[str, int] = field(default_factory=dict)
-    success_ci95: list[float] | None = None  # Wilson 95% interval of success_rate
-    memory_reset: dict[str, dict] = field(default_factory=dict)  # probe name -> eval.probe.compare
-    gym_id: str = ""  # the task version the episodes ran on
-
-
-def summarize(task: str, records: list[dict]) -> TaskResult:
-    n = len(records)
-    ok = sum(r["success"] for r in records)
-    endings = {e: sum(r["reason"] == e for r in records) for e in ENDINGS}
-    return TaskResult(task, get_task(task).tmc, n, ok, round(ok / n, 4) if n else 0.0,
-                      round(sum(r["progress"] for r in records) / n, 4) if n else 0.0, endings,
-                      [round(v, 4) for v in wilson(ok, n)] if n else None,
-                      gym_id=get_task(task).gym_id)
-
-
-def _check_identity(out: Path, cfg: EvalConfig) -> None:
-    """``out`` holds this evaluation (its ``run.json``), or none yet: a folder whose run.json
-    says other arguments is refused while any episode is recorded under it, and taken over
-    when none is (a run that stopped before its first episode, on a bad checkpoint say)."""
-    path = out / "run.json"
-    if not path.exists() and any((out / f).exists() for f in ("summary.json", "summary.md")):
-        raise EvalError(f"{out} holds a summary but no run.json: not an rmbench evaluation "
-                        f"folder, whose files this one would overwrite; use another --out")
-    if path.exists():
-        saved, asked = read_json_object(path), cfg.identity()
-        what = differences({**saved, "policy": _placed(saved.get("policy"))},
-                           {**asked, "policy": _placed(asked["policy"])})
-        if not what:
-            return
-        if any(p.stat().st_size for p in out.glob("*/*.jsonl")):
-            raise EvalError(f"{out} holds an evaluation with other arguments ({what}); use "
-                            f"another --out")
-    write_json(path, cfg.identity(), indent=2)
-
-
-def _placed(policy: Any) -> Any:
-    """A policy spec with the checkpoint folder it names resolved (``NAME:FOLDER[?QUERY]``,
-    where the folder exists): one checkpoint spelled from here as a relative path, an
-    absolute one or through a link is one policy, so that its evaluation resumes."""
-    if not isinstance(policy, str):
-        return policy
-    name, colon, arg = policy.partition(":")
-    folder, mark, query = arg.partition("?")
-    if not (colon and folder) or not Path(folder).is_dir():
-        return policy
-    return f"{name}:{Path(folder).resolve()}{mark}{query}"
-
-
 def _check_inputs(cfg: EvalConfig) -> None:
     """What the evaluation reads before it writes anything: the policy spec (with a
     checkpoint, its config; a remote policy, its server's answer) and the datasets whose seeds
@@ -220,7 +123,7 @@ def evaluate(cfg: EvalConfig) -> dict[str, Any]:
     out = Path(cfg.out)
     _check_inputs(cfg)
     out.mkdir(parents=True, exist_ok=True)
-    _check_identity(out, cfg)
+    check_identity(out, cfg.identity())
     results = {}
     for task in cfg.tasks:
         results[task] = _evaluate_task(cfg, task, out / task)
@@ -231,30 +134,9 @@ def evaluate(cfg: EvalConfig) -> dict[str, Any]:
     return summary
 
 
-def _check_version(folder: Path, task: str) -> None:
-    """A task folder holds episodes of one task version: a folder written on another (its
-    ``version.json``, or for episodes recorded before versions were kept, the version of that
-    time) is refused, never resumed."""
-    path, gym_id = folder / "version.json", get_task(task).gym_id
-    if path.exists():
-        try:
-            saved = json.loads(path.read_text()).get("gym_id")
-        except (OSError, json.JSONDecodeError, AttributeError) as err:
-            raise EvalError(f"{path} is unreadable ({err}); use another --out") from None
-    elif read_records(folder / "episodes.jsonl"):
-        saved = recorded_gym_id(task, {})
-    else:
-        saved = gym_id
-    if saved != gym_id:
-        raise EvalError(f"{folder} holds episodes of {saved}, this rmbench's {task} is "
-                        f"{gym_id} (CHANGELOG.md); use another --out")
-    if not path.exists():
-        write_json(path, {"gym_id": gym_id}, indent=None)
-
-
 def _evaluate_task(cfg: EvalConfig, task: str, folder: Path) -> TaskResult:
     folder.mkdir(parents=True, exist_ok=True)
-    _check_version(folder, task)
+    check_version(folder, task)
     entry, arg = parse_spec(cfg.policy)
     # one executor for the seed search and the episodes: its workers keep their env
     executor = make_executor(cfg.workers, cfg.backend, on_close=close_worker)
@@ -374,40 +256,3 @@ def job_size(cfg: EvalConfig, task: str, todo: int, executor) -> int:
     return max(cfg.batch, min(JOB_BATCHES * cfg.batch, share))
 
 
-def summary_markdown(summary: dict) -> str:
-    lines = [f"# {summary['policy']}: evaluation seed {summary['seed']}, "
-             f"{summary['instructions']} instructions", "",
-             "| task | TMC | episodes | success rate [95% interval] | mean progress | "
-             + " | ".join(ENDINGS) + " |",
-             "|---|---|---|---|---|" + "---|" * len(ENDINGS)]
-    for t, r in summary["tasks"].items():
-        lines.append(f"| {t} | {r['tmc']} | {r['episodes']} | {rate_text(r)} | "
-                     f"{r['mean_progress']:.3f} | "
-                     + " | ".join(str(r["endings"][e]) for e in ENDINGS) + " |")
-    probes = [(t, name, c) for t, r in summary["tasks"].items()
-              for name, c in r.get("memory_reset", {}).items() if c.get("episodes")]
-    if probes:
-        lines += ["", "## Memory probe (the policy reset mid-episode, the same seeds)", "",
-                  "| task | memory reset | episodes | reset in | without | with | drop (points) "
-                  "[95% interval] | outside the noise | lost / gained |",
-                  "|---|---|---|---|---|---|---|---|---|"]
-        for t, name, c in probes:
-            lines.append(f"| {t} | {name} | {c['episodes']} | {c['reset_episodes']} | "
-                         f"{rate_text(c['without'], c['episodes'])} | "
-                         f"{rate_text(c['with'], c['episodes'])} | {drop_text(c)} | "
-                         f"{'yes' if c['outside_noise'] else 'no'} | "
-                         f"{c['changed']['lost']} / {c['changed']['gained']} |")
-    return "\n".join(lines) + "\n"
-
-
-def rate_text(r: dict, episodes: int | None = None) -> str:
-    """'85.0% [76.7, 90.7]': a summary's success rate and its Wilson 95% interval (computed
-    from the count where an older summary lacks it)."""
-    n = r.get("episodes", episodes)
-    ci = r.get("success_ci95") or (wilson(round(r["success_rate"] * n), n) if n else None)
-    rate = f"{100 * r['success_rate']:.1f}%"
-    return rate if ci is None else f"{rate} [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]"
-
-
-def drop_text(c: dict) -> str:
-    return format_difference(c["drop"], *c["drop_ci95"], digits=1)

@@ -17,8 +17,9 @@ from pathlib import Path
 
 from rmbench.eval import published as _published
 from rmbench.eval.chance import chance
-from rmbench.eval.harness import drop_text, rate_text, read_records
 from rmbench.eval.intervals import wilson
+from rmbench.eval.records import read_records
+from rmbench.eval.summary import drop_text, rate_text
 from rmbench.files import read_json_object, write_atomic
 from rmbench.tasks.registry import ordered
 

@@ -7,8 +7,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
+from rmbench.eval.records import read_records
 from rmbench.suite.clock import TIMING, read_json
 from rmbench.suite.plan import Plan, memory_of
 from rmbench.suite.stages import evaluated

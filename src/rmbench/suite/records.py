@@ -22,8 +22,8 @@ from typing import Any
 
 from rmbench.eval.boundaries import summarize
 from rmbench.eval.endings import failures_by_stage
-from rmbench.eval.harness import read_records
 from rmbench.eval.intervals import wilson
+from rmbench.eval.records import read_records
 from rmbench.eval.report import Rate
 from rmbench.machine import describe
 from rmbench.policies.config import split_policy
