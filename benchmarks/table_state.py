@@ -229,6 +229,9 @@ def main(argv: list[str] | None = None) -> int:
                       help="what the training's wall alone needs said (it ran in pieces, ...)")
     said.add_argument("--eval-note", metavar="TEXT",
                       help="what the evaluation's wall alone needs said (it was resumed, ...)")
+    said.add_argument("--data-note", metavar="TEXT",
+                      help="what the tasks' data walls need said (their copies were rendered "
+                           "in pieces, beside other jobs, ...): kept beside those walls")
     said.add_argument("--train-piece", metavar="JSON", action="append", type=_train_piece,
                       help="a training run in pieces, one per machine or run, in step order: "
                            "'{\"machine\": \"h200\", \"steps\": [0, 17500], \"wall_s\": 442, "
@@ -268,6 +271,11 @@ def main(argv: list[str] | None = None) -> int:
                      "machine", "jobs_beside", "beside", "threads", "workers", "note",
                      "train_note", "eval_note", "train_beside", "eval_beside")},
                  args.recipe_changed, args.train_piece)
+    if args.data_note:
+        for task in args.tasks.split(","):
+            if task not in doc.get("data_walls", {}):
+                raise SystemExit(f"--data-note: {task} has no data walls in {args.table or args.evaluation}")
+            doc["data_walls"][task]["note"] = args.data_note
     write_json(args.out, doc)
     print(f"wrote {args.out}")
     return 0

@@ -231,6 +231,15 @@ def test_the_camera_table_starts_from_its_first_record(table_state, tmp_path):
     assert table_state.main(args) == 0
     assert json.loads(out.read_text())["data_walls"] == {
         "press_button": {"collect_wall_s": 2.0, "copies_wall_s": 3.0, "note": "in pieces"}}
+    # --data-note writes (or replaces) that note; for a task without data walls it is refused
+    assert table_state.main([*args, "--data-note", "beside tests"]) == 0
+    assert json.loads(out.read_text())["data_walls"]["press_button"]["note"] == "beside tests"
+    (tmp_path / "table.json").write_text(json.dumps(run))
+    doc = json.loads(out.read_text())
+    del doc["data_walls"]
+    out.write_text(json.dumps(doc))
+    with pytest.raises(SystemExit, match="--data-note: press_button has no data walls"):
+        table_state.main([*args, "--data-note", "beside tests"])
 
 
 def test_an_m1_seed_pools_across_dataset_formats_an_mn_seed_does_not(table_state):
