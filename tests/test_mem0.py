@@ -68,7 +68,7 @@ def test_anchor_is_the_first_frame_of_the_subtask_and_stays(mn_ckpt):
     anchors = []
     for _ in range(5):
         policy.act(obs)
-        anchors.append(policy.memory.anchor.clone())
+        anchors.append(policy.memories[0].anchor.clone())
         obs, *_ = env.step(np.asarray(obs["agent_pos"]))
     assert torch.allclose(anchors[0][0], first_tokens[0].detach())
     assert all(torch.equal(a, anchors[0]) for a in anchors)
@@ -77,14 +77,14 @@ def test_anchor_is_the_first_frame_of_the_subtask_and_stays(mn_ckpt):
     assert len(policy.keys) == 1
     policy.act(obs)
     tokens, _ = ex.encode(policy.inputs(obs))
-    assert torch.allclose(policy.memory.anchor[0], tokens[0])
+    assert torch.allclose(policy.memories[0].anchor[0], tokens[0])
     # The window is filled on the subtask's own phase, as training walks it: the subtask's
     # first frame (here the episode's sixth, odd) is pushed, then every memory_every-th.
-    assert policy.t == 6 and int(policy.memory.valid.sum()) == 1
+    assert policy.t == 6 and int(policy.memories[0].valid.sum()) == 1
     filled = []
     for _ in range(4):
         policy.act(obs)
-        filled.append(int(policy.memory.valid.sum()))
+        filled.append(int(policy.memories[0].valid.sum()))
     assert TINY.memory_every == 2 and filled == [1, 2, 2, 3]
     env.close()
 
@@ -148,6 +148,42 @@ def walk(policy, env, steps: int, after=None) -> list[torch.Tensor]:
             after(t, obs)
         obs, *_ = env.step(np.asarray(obs["agent_pos"]) + 0.01 * (t + 1))
     return zs
+
+
+def test_a_chunk_drawn_off_the_stride_reads_its_phase_memory(mn_ckpt):
+    """Training walks a subtask at the memory stride from a first frame 0 to stride - 1 steps
+    in: c_t's anchor is that frame and its newest window entry one stride old. A chunk drawn
+    at any step (here every 3 steps, the stride 2) reads such a memory: its phase's."""
+    env = make("press_button", cameras=("head", "left_wrist"), width=64, height=48)
+    policy = Mem0Policy(f"{mn_ckpt}?ablation=gt_classifier&execute=3", env)
+    assert TINY.memory_every == 2 and len(policy.memories) == 2
+    ex, read = policy.model.executor, []
+    context = ex.context
+
+    def spy(z, memory, text):
+        read.append({k: v[0].clone() for k, v in memory.state().items()})
+        return context(z, memory, text)
+
+    ex.context = spy
+    obs, info = env.reset(seed=100000)
+    policy.reset(info["instruction"], {"seed": 100000})
+    tokens, zs = [], []
+    for t in range(7):
+        tok, z = ex.encode(policy.inputs(obs))
+        tokens.append(tok[0])
+        zs.append(z[0])
+        policy.act(obs)
+        obs, *_ = env.step(np.asarray(obs["agent_pos"]) + 0.01 * (t + 1))
+    assert policy.slots[0].subtask_t == 7  # (no subtask ended: one walk from the first frame)
+    for t, memory in enumerate(read):
+        phase = t % 2
+        torch.testing.assert_close(memory["anchor"], tokens[phase], atol=1e-6, rtol=0)
+        frames = list(range(phase, t, 2))  # the phase's frames before this one
+        assert int(memory["valid"].sum()) == len(frames)
+        if frames:
+            torch.testing.assert_close(memory["sliding"][-len(frames):],
+                                       torch.stack([zs[f] for f in frames]), atol=1e-6, rtol=0)
+    env.close()
 
 
 def test_event_window_fills_on_the_episode_phase_and_outlives_subtask_ends(mn_ckpt):
@@ -598,8 +634,8 @@ def test_state_planner_and_memories_hold_state_embeddings(mn_state_ckpt, mn_data
     assert [x.shape for x in inputs] == [(1, len(Dataset(mn_dataset).state_names)), (1, 14)]
     policy.act(obs)
     tokens, _ = model.executor.encode(inputs)
-    assert policy.memory.anchor.shape == (1, TINY_STATE.state_tokens, TINY_STATE.dim)
-    assert torch.allclose(policy.memory.anchor[0], tokens[0])  # the subtask's first step
+    assert policy.memories[0].anchor.shape == (1, TINY_STATE.state_tokens, TINY_STATE.dim)
+    assert torch.allclose(policy.memories[0].anchor[0], tokens[0])  # the subtask's first step
     torch.testing.assert_close(policy.first, model.planner.embed(inputs))  # o_0 for the planner
     obs, *_ = env.step(np.asarray(obs["agent_pos"]))
     policy.subtask_ended(policy.inputs(obs))  # a key memory entry: the end frame's state

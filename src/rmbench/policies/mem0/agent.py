@@ -2,15 +2,17 @@
 
 Every step: encode the frames (through the frozen backbone first, for a checkpoint trained
 with one), or for a checkpoint trained on the state the observation's ``environment_state``
-and ``agent_pos``; at a subtask's first step the anchor is set and the sliding window emptied;
-c_t from the memories; a new chunk of H actions when the last D are used (or, with temporal
-ensembling, every few steps, averaged over the chunks that overlap); the end classifier's
-debounced verdict (or, with gt_classifier, the simulator's subtask boundary).
+and ``agent_pos``; at a subtask's first step the anchor is set and the sliding window emptied
+(one anchor and window per phase of the memory stride, each step reading its own phase's, as
+training's walks at the stride build them); c_t from the memories; a new chunk of H actions
+when the last D are used (or, with temporal ensembling, every few steps, averaged over the
+chunks that overlap); the end classifier's debounced verdict (or, with gt_classifier, the
+simulator's subtask boundary).
 When a subtask ends its text and end frame go to key memory and the planner names the next
 one. M(1) tasks run as one subtask, the goal: no planner, no classifier.
 
 Several episodes side by side (``act_batch``, policies/base.py): each slot keeps its own
-episode (memories as rows of one store, event window, debounce, planner state, subtask,
+episode (memories as rows of the stores, event window, debounce, planner state, subtask,
 chunk queue and a generator seeded from its task seed), and each step runs the encoder, the
 context, the end classifier and, when a slot needs a chunk, the action head once over all B
 slots, padded with copies of a live slot's observation to B rows. A float kernel may sum in
@@ -203,17 +205,21 @@ class Mem0Policy(BasePolicy):
                 # is the next step's first, as in the demonstrations' labels.
                 s.stage = s.env.subtask_stage
                 self.subtask_ended(per_row[i], i)
-        starting = self._mask(lambda s: s.start_subtask, live, n)
-        self.memory.reset(starting, tokens)
-        for i in map(int, starting.nonzero()[:, 0]):
+        for i in live:
             s = slots[i]
-            s.queue, s.start_subtask, s.next_chunk_at = [], False, s.t
-            s.subtask_t = 0
-            s.ensemble.reset()  # a new subtask's chunks do not average with the last one's
-        c = ex.context(z, self.memory, torch.tensor([s.subtask for s in slots]))
-        # Training walks each subtask from its first frame with this stride and pushes every
-        # frame it visits; the window here is filled on the same phase.
-        self.memory.push(z, self._mask(lambda s: s.subtask_t % cfg.memory_every == 0, live, n))
+            if s.start_subtask:
+                s.queue, s.start_subtask, s.next_chunk_at = [], False, s.t
+                s.subtask_t = 0
+                s.ensemble.reset()  # a new subtask's chunks do not average with the last one's
+        # Training walks each subtask at the memory stride from a first frame 0 to stride - 1
+        # steps into it: the anchor is that frame, the window every frame visited since, so c_t
+        # always reads a newest entry one stride old. Each phase of the stride keeps such a
+        # walk's memory (its anchor the phase's first frame), and a step reads its own phase's.
+        for p, store in enumerate(self.memories):
+            store.reset(self._mask(lambda s, p=p: s.subtask_t == p, live, n), tokens)
+        c = ex.context(z, self._memory_read(n), torch.tensor([s.subtask for s in slots]))
+        for p, store in enumerate(self.memories):
+            store.push(z, self._mask(lambda s, p=p: s.subtask_t % cfg.memory_every == p, live, n))
         actions: list[np.ndarray | None] = [None] * n
         if cfg.temporal_ensemble > 0:
             due = [i for i in live if slots[i].t >= slots[i].next_chunk_at]
@@ -257,15 +263,30 @@ class Mem0Policy(BasePolicy):
         if len(self.slots) == n:
             return
         cfg, keep = self.cfg, min(len(self.slots), n)
-        memory = MemoryStore(n, cfg.step_tokens, cfg.sliding_window, cfg.dim)
+        memories = [MemoryStore(n, cfg.step_tokens, cfg.sliding_window, cfg.dim)
+                    for _ in range(cfg.memory_every)]
         phases = cfg.memory_every if cfg.event_phases else 1
         windows = [EventWindow(n, cfg.event_window, cfg.dim) for _ in range(phases)]
         if keep:
-            for new, old in ((memory, self.memory), *zip(windows, self.event_windows, strict=True)):
+            for new, old in zip(memories + windows, self.memories + self.event_windows,
+                                strict=True):
                 new.load_state({k: torch.cat([v[:keep], getattr(new, k)[keep:]])
                                 for k, v in old.state().items()})
-        self.memory, self.event_windows = memory, windows
+        self.memories, self.event_windows = memories, windows
         self.slots = self.slots[:n] + [_Slot(cfg, self.goal) for _ in range(n - keep)]
+
+    def _memory_read(self, n: int) -> MemoryStore:
+        """The memory each of the n rows reads this step: its phase's (``subtask_t`` modulo
+        the stride). Chunks drawn on the stride (``execute`` and ``ensemble_every`` multiples
+        of it) and the "event" classifier read phase 0's alone, as before phases were kept."""
+        phase = [s.subtask_t % self.cfg.memory_every for s in self.slots[:n]]
+        if not any(phase):
+            return self.memories[0]
+        rows, which = torch.arange(n), torch.tensor(phase)
+        read = MemoryStore(n, self.cfg.step_tokens, self.cfg.sliding_window, self.cfg.dim)
+        read.load_state({k: torch.stack([m.state()[k] for m in self.memories])[which, rows]
+                         for k in ("anchor", "sliding", "valid")})
+        return read
 
     def _mask(self, test, live: list[int], n: int) -> torch.Tensor:
         """(n,) bool: the live slots whose state passes ``test``."""

@@ -68,7 +68,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     """K: sliding memory holds the last K z_img."""
     memory_every: int = 5
     """z_img enters the sliding memory every this many control steps (at 20 Hz, K=8 spans 2 s);
-    training walks each episode with this stride so it sees the memory inference builds."""
+    training walks each episode with this stride so it sees the memory inference builds. In
+    the closed loop each phase of the stride keeps its own anchor and window, so a chunk drawn
+    at any step reads a newest entry one stride old, as in training."""
     memory_noise: float = 0.0
     """With observation "state", training only: N(0, sigma) metres more on the environment
     state's positions in what enters the memories (the anchor and the sliding window), the
