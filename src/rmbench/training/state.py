@@ -130,9 +130,13 @@ def resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: di
         raise
     except (KeyError, TypeError, ValueError) as err:  # (a JSON error is a ValueError)
         # (a state that loads but is not what this run saves: keys missing, another model)
-        raise TrainingError(f"{out / STATE}: not a state this training can resume from "
-                            f"({type(err).__name__}: {str(err).splitlines()[0][:200]}); "
-                            f"use another --out") from None
+        raise _not_resumable(out, err) from None
+
+
+def _not_resumable(out: Path, err: Exception) -> TrainingError:
+    return TrainingError(f"{out / STATE}: not a state this training can resume from "
+                         f"({type(err).__name__}: {str(err).splitlines()[0][:200]}); "
+                         f"use another --out")
 
 
 def _resumed(out: Path, state: dict, model, opt, identity: dict, config_defaults,
@@ -149,9 +153,7 @@ def _resumed(out: Path, state: dict, model, opt, identity: dict, config_defaults
         model.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
     except RuntimeError as err:  # (another model's tensors; a device's own errors pass)
-        raise TrainingError(f"{out / STATE}: not a state this training can resume from "
-                            f"(RuntimeError: {str(err).splitlines()[0][:200]}); use another "
-                            f"--out") from None
+        raise _not_resumable(out, err) from None
     torch.set_rng_state(state["rng"].cpu())
     if "cuda_rng" in state and torch.cuda.is_available():
         torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
