@@ -56,7 +56,7 @@ def test_ddim_with_the_true_noise_recovers_the_sample():
         a = acp[k].float().view(-1, 1, 1)
         return (x - a.sqrt() * x0) / (1 - a).sqrt()
 
-    for steps in (1, 10, 100):
+    for steps in (1, 7, 10, 30, 60, 100):  # divisors of the 100 training steps or not
         out = sched.ddim_sample(oracle, x0.shape, steps, torch.Generator().manual_seed(0), "cpu")
         torch.testing.assert_close(out, x0, atol=1e-4, rtol=0)
     with pytest.raises(ValueError, match="DDIM steps"):
@@ -449,10 +449,12 @@ def test_state_noise_reaches_the_baselines_encoder(name, dataset):
     states = []
     model.observe = lambda inputs, state: (states.append(state), torch.zeros(len(state), 1))[1]
     trainer = trainer_cls(model, 0, names)
-    trainer.observe(batch)
+    _, last = trainer.observe(batch)
     moved = states[0] - batch[L.STATE].reshape(states[0].shape)
     assert float(moved[:, :6].std()) == pytest.approx(0.02, rel=0.15)
     assert torch.equal(moved[:, 6], torch.zeros_like(moved[:, 6]))
+    # the heads that read the joints (ACT's decoder and latent) get the same noisy read
+    assert torch.equal(last, states[0].reshape(len(last), -1, last.shape[-1])[:, -1])
 
 
 @pytest.mark.parametrize("name", sorted(BASELINES))

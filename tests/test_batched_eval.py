@@ -276,3 +276,24 @@ def test_baseline_slot_results_do_not_depend_on_the_other_slots(name):
         d = batched_actions(policy, [mine, (100005, episodes[100000]), None])
         assert not np.array_equal(d[0], d[1])
         np.testing.assert_array_equal(d[0], a)
+
+
+def test_jobs_split_the_seeds_evenly_over_the_workers(tmp_path):
+    from concurrent.futures import Future
+
+    from rmbench.eval.harness import JOB_BATCHES, job_count
+
+    class Batched:  # an executor whose policy has the batched form
+        def submit(self, *args):
+            done = Future()
+            done.set_result(True)
+            return done
+
+    for workers, batch, todo, want in ((1, 8, 100, 4), (2, 8, 100, 4), (2, 8, 99, 4),
+                                       (2, 8, 10, 2), (3, 4, 7, 3), (16, 8, 100, 16),
+                                       (4, 8, 3, 3)):
+        cfg = EvalConfig((TASK,), "random", tmp_path, workers=workers, batch=batch)
+        n = job_count(cfg, TASK, todo, Batched())
+        sizes = [(k + 1) * todo // n - k * todo // n for k in range(n)]
+        assert n == want and sum(sizes) == todo and max(sizes) - min(sizes) <= 1
+        assert max(sizes) <= JOB_BATCHES * batch

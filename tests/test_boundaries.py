@@ -1,6 +1,6 @@
 """Subtask-boundary diagnostics: a policy's declared ends against the simulator's (eval/boundaries.py)."""
 
-from rmbench.eval.boundaries import LATE, classify, end_steps, summarize
+from rmbench.eval.boundaries import LATE, boundary_counts, classify, end_steps
 
 
 def events(counted_after: list[int], declared_on: list[int]) -> list[list]:
@@ -28,10 +28,15 @@ def test_two_steps_counted_at_once_are_two_ends():
 
 def test_summary_counts_verdicts_and_first_wrong():
     records = [{"events": events([41, 101], [40, 101])}, {"events": events([41, 101], [35])}]
-    s = summarize(records)
+    s = boundary_counts(records)
     assert (s["on_time"], s["early"], s["missed"]) == (2, 1, 1)
     assert s["first_wrong"] == {"early": 1} and s["median_delay"] == 0.0
-    assert summarize([{"events": [[0, "task", "subtask_step", 0]]}]) is None  # no policy ends
+    assert boundary_counts([{"events": [[0, "task", "subtask_step", 0]]}]) is None  # no policy ends
+    # an episode whose events passed the limit has gaps: left out, and counted
+    capped = {"events": events([41], [40]) + [[None, "events", "left_out", 3]]}
+    s = boundary_counts(records + [capped])
+    assert s["episodes"] == 2 and s["capped"] == 1 and (s["on_time"], s["early"]) == (2, 1)
+    assert "capped" not in boundary_counts(records)
 
 
 def test_the_step_that_ends_the_episode_needs_no_declared_end():
@@ -40,5 +45,5 @@ def test_the_step_that_ends_the_episode_needs_no_declared_end():
     assert [e["verdict"] for e in classify(counted, declared, last_frame=100)] == ["on_time"]
     assert [e["verdict"] for e in classify(counted, declared, last_frame=150)] == [
         "on_time", "missed"]
-    s = summarize([{"steps": 101, "events": events([41, 101], [40])}])
+    s = boundary_counts([{"steps": 101, "events": events([41, 101], [40])}])
     assert (s["on_time"], s["missed"]) == (1, 0)

@@ -246,6 +246,34 @@ def test_overwrite_starts_over_and_foreign_folders_are_safe(tmp_path):
     assert (foreign / "notes.txt").read_text() == "keep me"
 
 
+def test_an_overwrite_killed_part_way_can_overwrite_again(dataset, tmp_path, monkeypatch):
+    root = copy(dataset, tmp_path)
+    real = writer._delete
+    for survives in range(4):  # killed after 0, 1, 2, 3 deletions
+        deleted = []
+
+        def killed(path, deleted=deleted, survives=survives):
+            if len(deleted) == survives:
+                raise KeyboardInterrupt
+            deleted.append(path)
+            real(path)
+
+        monkeypatch.setattr(writer, "_delete", killed)
+        with pytest.raises(KeyboardInterrupt):
+            collect(small(root, episodes=1, overwrite=True))
+        assert (root / L.RMBENCH).exists()  # still known as a dataset
+    monkeypatch.setattr(writer, "_delete", real)
+    collect(small(root, episodes=1, overwrite=True))
+    assert Dataset(root).num_episodes == 1
+
+
+def test_a_damaged_episode_record_is_named_when_resuming(dataset, tmp_path):
+    root = copy(dataset, tmp_path)
+    (root / L.episodes_file(1)).write_bytes(b"")
+    with pytest.raises(DatasetError, match=r"file-001\.parquet: unreadable"):
+        collect(small(root, episodes=4))
+
+
 def test_failed_seeds_are_skipped_and_logged(tmp_path, monkeypatch):
     real = record.run_expert
 

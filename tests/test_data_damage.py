@@ -4,13 +4,15 @@ of it deleted or read as something else."""
 import json
 import shutil
 
+import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
 from rmbench.data import CollectConfig, DatasetError, collect
 from rmbench.data import layout as L
-from rmbench.data.reader import Dataset
-from rmbench.data.writer import DatasetWriter
+from rmbench.data.reader import Dataset, column
+from rmbench.data.writer import DatasetWriter, vector_column
 from tests.conftest import DATA_TASK as TASK
 from tests.conftest import small_collection as small
 
@@ -66,6 +68,9 @@ def test_a_second_writer_of_a_folder_is_refused_while_the_first_writes(copied):
     ("other episode", r"file-001\.parquet: (\d+ rows, its episode's length is|rows of episode 0)"),
     ("short", r"file-001\.parquet: \d+ rows, its episode's length is \d+"),
     ("no state", r"file-001\.parquet: no column\(s\) \['observation\.state'\]"),
+    ("narrow action", r"file-001\.parquet: 'action' holds 13 values a frame, info\.json "
+                      r"declares 14"),
+    ("unknown subtask", r"file-001\.parquet: subtask_index 99 of \d+ subtasks"),
 ])
 def test_an_episode_is_read_only_from_its_own_whole_data_file(copied, damage, said):
     """Training reads episodes without their videos, so the data file alone must be checked:
@@ -75,13 +80,36 @@ def test_an_episode_is_read_only_from_its_own_whole_data_file(copied, damage, sa
         shutil.copy(copied / L.data_file(0), path)
     else:
         table = pq.read_table(path)
-        table = table.slice(0, len(table) - 3) if damage == "short" else \
-            table.drop_columns([L.STATE])
+        if damage == "short":
+            table = table.slice(0, len(table) - 3)
+        elif damage == "no state":
+            table = table.drop_columns([L.STATE])
+        elif damage == "narrow action":
+            i = table.column_names.index(L.ACTION)
+            table = table.set_column(i, L.ACTION, vector_column(column(table, L.ACTION)[:, :13]))
+        else:
+            i = table.column_names.index(L.SUBTASK_INDEX)
+            table = table.set_column(i, L.SUBTASK_INDEX, pa.array(
+                np.full(len(table), 99, dtype=np.int64)))
         pq.write_table(table, path)
     ds = Dataset(copied)
     assert len(ds.episode(0, cameras=[])) == ds.lengths[0]
     with pytest.raises(DatasetError, match=said):
         ds.episode(1, cameras=[])
+
+
+@pytest.mark.parametrize("name, value, said", [
+    ("tasks", [], r"'tasks' holds 0 texts"),
+    ("rmbench/hidden", "{bad", r"'rmbench/hidden' is not JSON"),
+])
+def test_an_episode_record_of_bad_values_is_named(copied, name, value, said):
+    path = copied / L.episodes_file(1)
+    table = pq.read_table(path)
+    i = table.column_names.index(name)
+    table = table.set_column(i, name, pa.array([value], type=table.schema.field(name).type))
+    pq.write_table(table, path)
+    with pytest.raises(DatasetError, match=r"file-001\.parquet: " + said):
+        _ = Dataset(copied).episodes
 
 
 def test_records_of_the_wrong_shape_are_one_line_errors(copied):

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from rmbench.eval import EvalConfig, EvalError, evaluate
+from rmbench.eval.endings import stage_at_end
 from rmbench.eval.events import Events
 from rmbench.eval.records import read_records
 from rmbench.policies import BasePolicy, UnknownPolicyError, register_policy
@@ -76,8 +77,15 @@ def test_events_keep_discrete_changes_only_and_count_what_the_limit_leaves_out()
     ev.update(2, "task", {"lamp": "red"})
     ev.update(2, "policy", {"subtask": "swap"})
     ev.update(3, "task", {"lamp": "off"})
+    # past the limit each value's last change is kept: the lamp ended off, the subtask swap
     assert ev.to_list() == [[0, "task", "lamp", "off"], [0, "task", "row", [0, 1]],
-                            [2, "task", "lamp", "red"], [None, "events", "left_out", 2]]
+                            [2, "task", "lamp", "red"], [2, "policy", "subtask", "swap"],
+                            [3, "task", "lamp", "off"], [None, "events", "left_out", 2]]
+    assert stage_at_end({"events": Events(limit=1).to_list()}) == ""
+    capped = Events(limit=1)
+    for step, stage in enumerate(["reach", "grasp", "lift"]):
+        capped.update(step, "task", {"subtask": stage})
+    assert stage_at_end({"events": capped.to_list()}) == "lift"
     assert json.loads(json.dumps(ev.to_list())) == ev.to_list()
 
 
@@ -102,6 +110,23 @@ def test_resume_keeps_complete_records_and_drops_a_torn_one(tmp_path):
     strip = [{k: v for k, v in r.items() if k != "wall_s"} for r in again]
     assert [r["seed"] for r in again] == [r["seed"] for r in full]
     assert strip == [{k: v for k, v in r.items() if k != "wall_s"} for r in full]
+
+
+def test_a_folder_is_evaluated_by_one_process_and_a_seed_counts_once(tmp_path):
+    from rmbench.eval.harness import LOCK
+    from rmbench.files import lock
+
+    summary = evaluate(cfg(tmp_path, policy="random"))
+    out = tmp_path / "out"
+    with lock(out / LOCK), pytest.raises(EvalError, match=r"out is being evaluated by another "
+                                                           r"process \(\d+\)"):
+        evaluate(cfg(tmp_path, policy="random"))
+    path = out / TASK / "episodes.jsonl"
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines + lines[:1]))  # a seed recorded twice (an older folder)
+    again = evaluate(cfg(tmp_path, policy="random"))
+    assert again["tasks"][TASK]["episodes"] == summary["tasks"][TASK]["episodes"]
+    assert again["tasks"][TASK]["successes"] == summary["tasks"][TASK]["successes"]
 
 
 def test_sigkill_and_resume_gives_exactly_n_unique_episodes(tmp_path):

@@ -30,3 +30,23 @@ def test_a_json_object_read_back_names_its_file(tmp_path, text, message):
         read_json_object(path, ("a", "b"))
     path.write_text('{"a": 1, "b": 2}')
     assert read_json_object(path, ("a", "b")) == {"a": 1, "b": 2}
+
+
+def test_a_lock_refuses_a_second_holder_or_waits_for_it(tmp_path):
+    import threading
+
+    from rmbench.files import Locked, lock
+
+    path = tmp_path / "x.lock"
+    first = lock(path)
+    with pytest.raises(Locked, match=rf"locked by process {os.getpid()}"):
+        lock(path)
+    got = []
+    waiter = threading.Thread(target=lambda: got.append(lock(path, wait=True)))
+    waiter.start()
+    waiter.join(0.3)
+    assert waiter.is_alive() and not got  # still waiting while the first holds it
+    first.close()
+    waiter.join(5)
+    assert got and not waiter.is_alive()
+    got[0].close()

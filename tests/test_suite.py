@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from rmbench.cli.main import main as cli
+from rmbench.data.reader import Dataset
 from rmbench.eval.chance import chance
 from rmbench.eval.intervals import wilson
 from rmbench.machine import describe, short
@@ -751,6 +752,13 @@ def test_a_table_refuses_another_tables_demonstrations(toy_table, tmp_path, caps
         assert len(err.strip().splitlines()) == 1
     assert not (out / "observe_and_pickup" / "train").exists()
     assert not (out / "table.json").exists()
+    # more demonstrations than cells already trained on the folder's: refused too, since
+    # those cells' folders would name the larger table's
+    shutil.copytree(toy_table[0] / "observe_and_pickup" / "train", out / "observe_and_pickup" / "train")
+    assert cli(base + ["--demos", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "2 demonstrations there and cells trained on them, 3 asked" in err, err
+    assert Dataset(out / "observe_and_pickup" / "data").num_episodes == 2
 
 
 def test_one_table_at_a_time_runs_a_task_in_an_out(tmp_path):

@@ -28,15 +28,15 @@ class Locked(RuntimeError):
         self.path, self.holder = path, holder
 
 
-def lock(path: str | Path) -> IO[str]:
+def lock(path: str | Path, wait: bool = False) -> IO[str]:
     """An exclusive lock on ``path`` (created, with this process's pid in it): the open file,
     whose closing releases it, as does the process's end however it ends; ``Locked`` if
-    another process holds it."""
+    another process holds it, or with ``wait`` once that process lets it go."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     f: IO[str] = open(path, "a+")
     try:
-        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(f, fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         f.seek(0)
         holder = f.read().strip()

@@ -69,7 +69,7 @@ def cmd_report(args) -> int:
 def cmd_boundaries(args) -> int:
     from pathlib import Path
 
-    from rmbench.eval.boundaries import VERDICTS, summarize
+    from rmbench.eval.boundaries import VERDICTS, boundary_counts
     from rmbench.eval.records import read_records
 
     folder = Path(args.dir)
@@ -79,12 +79,13 @@ def cmd_boundaries(args) -> int:
     print("| task | episodes | " + " | ".join(VERDICTS) + " | median delay | first wrong |")
     print("|---|---|" + "---|" * len(VERDICTS) + "---|---|")
     for task in tasks:
-        s = summarize(read_records(folder / task / "episodes.jsonl"))
+        s = boundary_counts(read_records(folder / task / "episodes.jsonl"))
         if s is None:
             print(f"| {task} | no subtask ends declared by the policy |" + " |" * (len(VERDICTS) + 1))
             continue
         first = ", ".join(f"{k} {v}" for k, v in s["first_wrong"].items()) or "-"
-        print(f"| {task} | {s['episodes']} | " + " | ".join(str(s[v]) for v in VERDICTS)
+        capped = f" ({s['capped']} more past the event limit, left out)" if "capped" in s else ""
+        print(f"| {task} | {s['episodes']}{capped} | " + " | ".join(str(s[v]) for v in VERDICTS)
               + f" | {s['median_delay']} | {first} |")
     return 0
 

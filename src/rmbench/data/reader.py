@@ -251,7 +251,15 @@ class Dataset:
                     raise DatasetError(f"{path}: {name!r} is {col.type}"
                                        f"{' null' if col.null_count else ''}, not what a reader reads")
             table = table.select([c for c in table.column_names if not c.startswith("stats/")])
-            rows.append({k: v[0] for k, v in table.to_pydict().items()})
+            row = {k: v[0] for k, v in table.to_pydict().items()}
+            if len(row["tasks"]) != 1:
+                raise DatasetError(f"{path}: 'tasks' holds {len(row['tasks'])} texts, an "
+                                   f"episode has one instruction")
+            try:
+                json.loads(row["rmbench/hidden"])
+            except json.JSONDecodeError as err:
+                raise DatasetError(f"{path}: 'rmbench/hidden' is not JSON ({err})") from None
+            rows.append(row)
         return rows
 
     def image_stats(self, episode: int) -> dict[str, dict[str, np.ndarray]]:
@@ -306,6 +314,17 @@ class Dataset:
         own = column(table, "episode_index")
         if len(own) and not (own == index).all():
             raise DatasetError(f"{path}: rows of episode {int(own[own != index][0])}, not {index}")
+        for key in (L.STATE, L.EE_POSE, L.ACTION, L.ENV_STATE):
+            declared = self.features.get(key, {}).get("shape")
+            if key in table.column_names and declared:
+                width = len(table.column(key).combine_chunks().flatten()) // max(len(table), 1)
+                if len(table) and width != declared[0]:
+                    raise DatasetError(f"{path}: {key!r} holds {width} values a frame, "
+                                       f"info.json declares {declared[0]}")
+        subtask = column(table, L.SUBTASK_INDEX)
+        if len(subtask) and not 0 <= subtask.min() <= subtask.max() < len(self.subtasks):
+            raise DatasetError(f"{path}: subtask_index {int(subtask.max())} of "
+                               f"{len(self.subtasks)} subtasks (meta/subtasks.parquet)")
         return table
 
     def episode(self, index: int, cameras: list[str] | tuple[str, ...] | None = None) -> Episode:

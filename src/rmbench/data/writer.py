@@ -279,8 +279,11 @@ class DatasetWriter:
             raise DatasetError(f"{self.root} was collected with other arguments ({what}); run "
                                f"with the same arguments to resume, or --overwrite to start over")
         for meta in _committed_episode_files(self.root):
-            table = pq.read_table(meta)
-            row = {k: v[0] for k, v in table.to_pydict().items()}
+            try:
+                row = {k: v[0] for k, v in pq.read_table(meta).to_pydict().items()}
+            except (OSError, pa.ArrowException, IndexError) as err:
+                raise DatasetError(f"{meta}: unreadable ({err}); the dataset is damaged, "
+                                   f"--overwrite to start over") from None
             if type(row.get("rmbench/seed")) is not int:
                 raise DatasetError(f"{meta}: no episode seed; the dataset is damaged, "
                                    f"--overwrite to start over")
@@ -325,11 +328,24 @@ class DatasetWriter:
     def _remove(self) -> None:
         if not (self.root / L.RMBENCH).exists() and _holds_files(self.root):
             raise DatasetError(f"refusing to delete {self.root}: it is not an rmbench dataset")
-        for path in self.root.iterdir():  # all but the lock this writer holds
-            if path.is_dir() and not path.is_symlink():
-                shutil.rmtree(path)
-            elif path.name != WRITING:
-                path.unlink()
+        # all but the lock this writer holds, and rmbench.json last: a run killed part way
+        # leaves a folder still known as a dataset, which the next --overwrite deletes
+        mark = self.root / L.RMBENCH
+        for path in [p for p in self.root.iterdir() if p.name != WRITING and p != mark.parent]:
+            _delete(path)
+        if mark.parent.is_dir():
+            for path in [p for p in mark.parent.iterdir() if p != mark]:
+                _delete(path)
+            mark.unlink(missing_ok=True)
+            mark.parent.rmdir()
+
+
+def _delete(path: Path) -> None:
+    """A file, a link or a whole folder."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink()
 
 
 def _holds_files(root: Path) -> bool:

@@ -76,12 +76,16 @@ def classify(counted: list[int], declared: list[int],
     return out
 
 
-def summarize(records: list[dict]) -> dict[str, Any] | None:
+def boundary_counts(records: list[dict]) -> dict[str, Any] | None:
     """Counts of each verdict over an evaluation's records, the median delay of matched ends,
-    and the episodes' first wrong verdict; None when no record has a policy's declared ends."""
+    and the episodes' first wrong verdict; None when no record has a policy's declared ends.
+    An episode whose events passed ``events.LIMIT`` is left out (the ends between the limit
+    and its last changes are not kept), counted in ``capped``."""
     if not any(e[1] == "policy" and e[2] == "subtask_ends" for r in records
                for e in r.get("events", [])):
         return None
+    whole = [r for r in records if not any(e[2] == "left_out" for e in r.get("events", []))]
+    capped, records = len(records) - len(whole), whole
     counts: Counter = Counter()
     first_wrong: Counter = Counter()
     delays = []
@@ -95,4 +99,5 @@ def summarize(records: list[dict]) -> dict[str, Any] | None:
             first_wrong[wrong["verdict"]] += 1
     return {"episodes": len(records), **{v: counts[v] for v in VERDICTS},
             "median_delay": float(np.median(delays)) if delays else None,
-            "first_wrong": {v: first_wrong[v] for v in VERDICTS if first_wrong[v]}}
+            "first_wrong": {v: first_wrong[v] for v in VERDICTS if first_wrong[v]},
+            **({"capped": capped} if capped else {})}

@@ -4,8 +4,9 @@ status changed, kept in the episode's record.
 An ending says how an episode failed; its events say where the failure began. On
 blocks_ranking_try, a Mem-0 whose subtask turns to a swap with no press recorded before it
 has trusted a false subtask end. Only discrete values are followed (a float such as a lift
-height changes every step), and an episode keeps at most ``LIMIT`` events, with the number
-left out as its last entry.
+height changes every step), and an episode keeps at most ``LIMIT`` events; past it, each
+value's last change is still kept (so the stage an episode ended in stays known), then the
+number of changes left out as the last entry.
 """
 
 from __future__ import annotations
@@ -38,21 +39,27 @@ class Events:
         self.limit = limit
         self.items: list[list] = []
         self.left_out = 0
-        self._last: dict[tuple[str, str], Any] = {}
+        self._last: dict[tuple[str, str], list] = {}  # each value's last change, kept or not
+        self._kept: dict[tuple[str, str], Any] = {}
 
     def update(self, step: int, source: str, values: dict[str, Any]) -> None:
         for key, value in values.items():
             value = plain(value)
             if isinstance(value, float):
                 continue
-            if (source, key) in self._last and self._last[source, key] == value:
+            if (source, key) in self._last and self._last[source, key][3] == value:
                 continue
-            self._last[source, key] = value
+            self._last[source, key] = [step, source, key, value]
             if len(self.items) < self.limit:
                 self.items.append([step, source, key, value])
+                self._kept[source, key] = value
             else:
                 self.left_out += 1
 
     def to_list(self) -> list[list]:
-        tail = [[None, "events", "left_out", self.left_out]] if self.left_out else []
-        return self.items + tail
+        if not self.left_out:
+            return list(self.items)
+        last = [event for k, event in self._last.items()
+                if k not in self._kept or self._kept[k] != event[3]]
+        return self.items + sorted(last, key=lambda e: e[0]) + [
+            [None, "events", "left_out", self.left_out]]

@@ -35,7 +35,7 @@ from rmbench.eval.records import EvalError, TaskResult, read_records, summarize
 from rmbench.eval.seeds import verified_seeds
 from rmbench.eval.summary import summary_markdown
 from rmbench.eval.worker import close_worker, episodes_job, policy_batches
-from rmbench.files import write_atomic, write_json
+from rmbench.files import Locked, lock, write_atomic, write_json
 from rmbench.parallel import Inline, check_backend, in_order, make_executor
 from rmbench.policies.registry import check_policy, env_options, parse_spec
 from rmbench.seeds import SPLITS
@@ -119,18 +119,27 @@ def _check_inputs(cfg: EvalConfig) -> None:
             dataset_seeds(source, task)
 
 
+LOCK = ".evaluating"  # held by the process evaluating into a folder
+
+
 def evaluate(cfg: EvalConfig) -> dict[str, Any]:
     out = Path(cfg.out)
     _check_inputs(cfg)
     out.mkdir(parents=True, exist_ok=True)
-    check_identity(out, cfg.identity())
-    results = {}
-    for task in cfg.tasks:
-        results[task] = _evaluate_task(cfg, task, out / task)
-    summary = {"policy": cfg.policy, "seed": cfg.seed, "instructions": cfg.instructions,
-               "tasks": {t: r.__dict__ for t, r in results.items()}}
-    write_json(out / "summary.json", summary, indent=2)
-    write_atomic(out / "summary.md", summary_markdown(summary).encode())
+    try:  # two runs appending to one folder would both play every seed it lacks
+        held = lock(out / LOCK)
+    except Locked as err:
+        raise EvalError(f"{out} is being evaluated by another process ({err.holder or '?'}); "
+                        f"wait for it, or evaluate into another --out") from None
+    with held:
+        check_identity(out, cfg.identity())
+        results = {}
+        for task in cfg.tasks:
+            results[task] = _evaluate_task(cfg, task, out / task)
+        summary = {"policy": cfg.policy, "seed": cfg.seed, "instructions": cfg.instructions,
+                   "tasks": {t: r.__dict__ for t, r in results.items()}}
+        write_json(out / "summary.json", summary, indent=2)
+        write_atomic(out / "summary.md", summary_markdown(summary).encode())
     return summary
 
 
@@ -175,12 +184,15 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
     """The seeds' episodes not yet recorded, into the ordinary arm or ``probe``'s (whose
     episodes keep no video: the ordinary arm's show the same layouts)."""
     path = folder / (arm_file(probe.name) if probe else "episodes.jsonl")
-    records = [r for r in read_records(path, repair=True) if r["seed"] in seeds]
-    done = {r["seed"] for r in records}
+    records, done = [], set()
+    for r in read_records(path, repair=True):  # each seed's first record (folders written
+        if r["seed"] in seeds and r["seed"] not in done:  # before the lock may hold two)
+            records.append(r)
+            done.add(r["seed"])
     todo = [(i, s) for i, s in enumerate(seeds) if s not in done]
     n_todo = len(todo)
-    size = job_size(cfg, task, len(todo), executor) if todo else 1
-    jobs = [todo[k:k + size] for k in range(0, len(todo), size)]
+    n = job_count(cfg, task, len(todo), executor) if todo else 0
+    jobs = [todo[k * len(todo) // n:(k + 1) * len(todo) // n] for k in range(n)]
     desc = f"{task} {cfg.policy}" + (f" memory reset {probe.spec}" if probe else "")
     bar = tqdm(total=len(seeds), initial=len(done), unit="ep", desc=desc,
                disable=not cfg.progress, dynamic_ncols=True)
@@ -245,14 +257,14 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
 JOB_BATCHES = 4
 
 
-def job_size(cfg: EvalConfig, task: str, todo: int, executor) -> int:
-    """Seeds per worker job: one for a policy without the batched form (its records are
-    written as each episode ends, as before batches), else up to ``JOB_BATCHES`` batches,
-    no more than a worker's share and no fewer than one batch."""
+def job_count(cfg: EvalConfig, task: str, todo: int, executor) -> int:
+    """Worker jobs for ``todo`` seeds: one a seed for a policy without the batched form (its
+    records are written as each episode ends, as before batches), else a multiple of
+    ``workers`` jobs of at most ``JOB_BATCHES`` batches each, split evenly, so that no worker
+    is left with a short last job while another runs a full one."""
     if cfg.batch == 1 or not executor.submit(policy_batches, task, cfg.policy,
                                              cfg.instructions).result():
-        return 1
-    share = -(-todo // cfg.workers)
-    return max(cfg.batch, min(JOB_BATCHES * cfg.batch, share))
+        return todo
+    return min(todo, cfg.workers * -(-todo // (cfg.workers * JOB_BATCHES * cfg.batch)))
 
 

@@ -35,14 +35,17 @@ def wilson(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
     return low, high
 
 
+def ci95(count: int, of: int) -> list[float] | None:
+    """The Wilson 95% interval of ``count`` out of ``of`` as the results files store it:
+    fractions to 4 places, None where there is nothing to count."""
+    return [round(v, 4) for v in wilson(count, of)] if of else None
+
+
 def share(count: int, of: int) -> dict:
     """{count, of, rate, ci95}: a count out of a total as the results files store it, the rate
     and its Wilson interval as fractions (both None where there is nothing to count)."""
-    if not of:
-        return {"count": count, "of": of, "rate": None, "ci95": None}
-    low, high = wilson(count, of)
-    return {"count": count, "of": of, "rate": round(count / of, 4),
-            "ci95": [round(low, 4), round(high, 4)]}
+    return {"count": count, "of": of, "rate": round(count / of, 4) if of else None,
+            "ci95": ci95(count, of)}
 
 
 def difference(k1: int, n1: int, k2: int, n2: int, z: float = Z95) -> tuple[float, float, float]:

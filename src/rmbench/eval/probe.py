@@ -22,7 +22,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from rmbench.eval.intervals import difference, outside_noise, wilson
+from rmbench.eval.intervals import ci95, difference, outside_noise
 
 
 @dataclass(frozen=True)
@@ -93,9 +93,9 @@ def compare(plain: list[dict], probed: list[dict]) -> dict[str, Any]:
     d, low, high = difference(k0, n, k1, n)
     return {"episodes": n, "reset_episodes": sum(bool(b.get("memory_resets")) for _, b in pairs),
             "without": {"successes": k0, "success_rate": round(k0 / n, 4),
-                        "success_ci95": [round(v, 4) for v in wilson(k0, n)]},
+                        "success_ci95": ci95(k0, n)},
             "with": {"successes": k1, "success_rate": round(k1 / n, 4),
-                     "success_ci95": [round(v, 4) for v in wilson(k1, n)],
+                     "success_ci95": ci95(k1, n),
                      "mean_progress": round(sum(b["progress"] for _, b in pairs) / n, 4)},
             "drop": round(d, 4), "drop_ci95": [round(low, 4), round(high, 4)],
             "outside_noise": outside_noise(k0, n, k1, n),

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rmbench.eval.episode import ENDINGS
-from rmbench.eval.intervals import wilson
+from rmbench.eval.intervals import ci95
 from rmbench.tasks import get_task
 
 log = logging.getLogger(__name__)
@@ -75,5 +75,5 @@ def summarize(task: str, records: list[dict]) -> TaskResult:
     endings = {e: sum(r["reason"] == e for r in records) for e in ENDINGS}
     return TaskResult(task, get_task(task).tmc, n, ok, round(ok / n, 4) if n else 0.0,
                       round(sum(r["progress"] for r in records) / n, 4) if n else 0.0, endings,
-                      [round(v, 4) for v in wilson(ok, n)] if n else None,
+                      ci95(ok, n),
                       gym_id=get_task(task).gym_id)

@@ -19,7 +19,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from rmbench.eval.worker import close_worker, episode_job
-from rmbench.files import write_json
+from rmbench.files import lock, write_json
 from rmbench.parallel import Inline
 from rmbench.seeds import SPLIT_STRIDE, eval_seed_start
 from rmbench.tasks import get_task
@@ -40,12 +40,28 @@ def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = Non
     # (the test split's file keeps the name it had before there were splits)
     name = f"{cls.gym_id.replace('/', '_')}-seed{seed}" + ("" if split == "test" else f"-{split}")
     path = Path(cache or cache_dir()) / f"{name}.json"
-    state = {"task": cls.name, "gym_id": cls.gym_id, "seed": seed, "verified": [], "rejected": []}
+    state = _cached(path, cls, seed)
+    if len(state["verified"]) >= episodes:
+        return state["verified"][:episodes]
+    # one search at a time (a table starts a task's evaluations together); the one that
+    # waited reads what the other found
+    with lock(path.with_name(path.name + ".lock"), wait=True):
+        return _search(cls, _cached(path, cls, seed), path, start, episodes, executor, progress)
+
+
+def _cached(path: Path, cls, seed: int) -> dict:
+    """The seed cache at ``path``, or an empty one."""
     if path.exists():
         try:
-            state = json.loads(path.read_text())
+            return json.loads(path.read_text())
         except (OSError, json.JSONDecodeError):
             log.warning("ignoring unreadable seed cache %s", path)
+    return {"task": cls.name, "gym_id": cls.gym_id, "seed": seed, "verified": [], "rejected": []}
+
+
+def _search(cls, state: dict, path: Path, start: int, episodes: int, executor,
+            progress: bool) -> list[int]:
+    """``state``'s verified seeds extended to ``episodes``, saved after every candidate."""
     verified = state["verified"]
     if len(verified) >= episodes:
         return verified[:episodes]

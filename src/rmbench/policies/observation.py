@@ -257,14 +257,14 @@ def joint_noise_scale(cfg: ReadsObservation) -> torch.Tensor | None:
     return torch.as_tensor(JOINTS, dtype=torch.float32) * cfg.joint_noise
 
 
-def add_state_noise(env_state: torch.Tensor, scale: torch.Tensor | None,
+def add_state_noise(x: torch.Tensor, scale: torch.Tensor | None,
                     generator: torch.Generator) -> torch.Tensor:
-    """``env_state`` (..., D) plus N(0, ``scale``) per entry (unchanged when scale is None);
-    the joint state's noise too (``joint_noise_scale``)."""
+    """``x`` (..., D), an environment state or the joint state, plus N(0, ``scale``) per
+    entry (``state_noise_scale``, ``joint_noise_scale``); ``x`` itself when scale is None."""
     if scale is None:
-        return env_state
-    noise = torch.randn(env_state.shape, generator=generator)
-    return env_state + (noise * scale).to(env_state)
+        return x
+    noise = torch.randn(x.shape, generator=generator)
+    return x + (noise * scale).to(x)
 
 
 def image_tensors(observation: dict[str, Any], cameras: tuple[str, ...],

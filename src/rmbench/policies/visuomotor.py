@@ -157,10 +157,11 @@ class VisuomotorTrainer(nn.Module):
         self.exchange = exchange_groups(model.cfg, state_names)
         self.joint_scale = joint_noise_scale(model.cfg)
 
-    def observe(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
-        """The window's features (B, obs_steps, ...) through ``model.observe``."""
+    def observe(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """The window's features (B, obs_steps, ...) through ``model.observe``, and the joint
+        state the policy reads at the window's last step (B, 14): noisy with joint_noise,
+        which every head that reads the joints must see (``target`` keeps the exact one)."""
         cfg = self.model.cfg
-        # the joint state the policy reads (noisy with joint_noise); ``target`` uses the exact one
         state = add_state_noise(batch[L.STATE], self.joint_scale, self.generator)
         if cfg.obs_steps == 1:
             state = state[:, None]
@@ -178,7 +179,7 @@ class VisuomotorTrainer(nn.Module):
                 inputs.append(color_jitter(img, self.generator, *cfg.jitter) if any(cfg.jitter)
                               else img)
         features = self.model.observe(inputs, state.reshape(b * n, -1))
-        return features.reshape(b, n, *features.shape[1:])
+        return features.reshape(b, n, *features.shape[1:]), state[:, -1]
 
     def target(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
         """Normalised action chunk, relative to the window's last state."""
@@ -285,10 +286,10 @@ class VisuomotorPolicy(BasePolicy):
             cfg = replace(self.config_cls.from_dict(describe["config"]), **overrides)
         except (TypeError, ValueError) as err:
             raise CheckpointError(f"{path}: {err}") from None
+        check_features(path, describe, cfg)
         model = self.model_cls(cfg, len(describe.get("state_names") or ()))
         load_weights(path, model, describe["step"])
         check_task(path, describe, env)
-        check_features(path, describe, cfg)
         self._setup(model, describe)
 
     @classmethod

@@ -124,7 +124,8 @@ class RayJobs:
                 self.ray.get(ref)
                 done.append((job, None))
             except Exception as err:  # a task's error, re-raised by Ray: reported, not fatal
-                done.append((job, f"{type(err).__name__}: {str(err).splitlines()[-1]}"))
+                last = (str(err).strip().splitlines() or [""])[-1]  # (Ray's carry a traceback)
+                done.append((job, f"{type(err).__name__}: {last}"))
         return done
 
     def stop(self) -> None:

@@ -7,7 +7,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from rmbench.eval.intervals import wilson
+from rmbench.eval.intervals import ci95
 from rmbench.eval.records import read_records
 from rmbench.suite.clock import TIMING, read_json
 from rmbench.suite.plan import Plan, memory_of
@@ -44,7 +44,7 @@ def result_row(result: dict[str, Any], task: str, ckpt: Path, evals: Path,
     n = result["episodes"]
     k = result.get("successes", round(result["success_rate"] * n))  # (older summaries)
     return {"success_rate": result["success_rate"], "successes": k,
-            "success_ci95": [round(v, 4) for v in wilson(k, n)] if n else None,
+            "success_ci95": ci95(k, n),
             "mean_progress": result["mean_progress"],
             "episodes": n, "endings": result["endings"],
             "failure_reasons": failure_reasons(evals / task / "episodes.jsonl"),
@@ -77,7 +77,7 @@ def pooled_row(rows: dict[int, dict[str, Any] | None]) -> dict[str, Any] | None:
     n, k = sum(r["episodes"] for r in seeds), sum(r["successes"] for r in seeds)
     walls = {w: sum(r[w] or 0 for r in seeds) for w in ("train_wall_s", "eval_wall_s")}
     return {"success_rate": round(k / n, 4), "successes": k,
-            "success_ci95": [round(v, 4) for v in wilson(k, n)],
+            "success_ci95": ci95(k, n),
             "mean_progress": round(sum(r["mean_progress"] * r["episodes"] for r in seeds) / n, 4),
             "episodes": n,
             "endings": dict(sum((Counter(r["endings"]) for r in seeds), Counter())),

@@ -49,6 +49,10 @@ def check_data(plan: Plan, out: Path) -> None:
         if ds.num_episodes > plan.demos:
             what = ", ".join(x for x in (what, f"{ds.num_episodes} demonstrations there, "
                                                f"{plan.demos} asked") if x)
+        elif ds.num_episodes < plan.demos and any((out / task / "train").glob("*/config.json")):
+            # a collection resumed to more would leave those cells, named alike, on fewer
+            what = ", ".join(x for x in (what, f"{ds.num_episodes} demonstrations there and "
+                                               f"cells trained on them, {plan.demos} asked") if x)
         if what:
             raise ValueError(f"{root} holds demonstrations of another table ({what}); "
                              f"use another --out")

@@ -20,9 +20,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from rmbench.eval.boundaries import summarize
+from rmbench.eval.boundaries import boundary_counts
 from rmbench.eval.endings import failures_by_stage
-from rmbench.eval.intervals import wilson
+from rmbench.eval.intervals import ci95
 from rmbench.eval.records import read_records
 from rmbench.eval.report import Rate
 from rmbench.machine import describe
@@ -117,10 +117,10 @@ def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
         return out
     rate = Rate.of(row)  # a row written before rates carried their counts has the rate alone
     out["successes"] = rate.successes
-    out["success_ci95"] = [round(v, 4) for v in wilson(rate.successes, rate.episodes)]
+    out["success_ci95"] = ci95(rate.successes, rate.episodes)
     records = read_records(Path(row["evaluation"]) / task / "episodes.jsonl")
     # declared subtask ends against the simulator's: an M(1) task runs one subtask, the goal
-    out["boundaries"] = summarize(records) if get_task(task).tmc == "M(n)" else None
+    out["boundaries"] = boundary_counts(records) if get_task(task).tmc == "M(n)" else None
     out["failed_at"] = failures_by_stage(records)
     planner = Path(row["checkpoint"]) / "training" / "planner.json"  # M(n) checkpoints only
     out["planner"] = json.loads(planner.read_text()) if planner.exists() else None

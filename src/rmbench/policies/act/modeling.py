@@ -19,7 +19,6 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from rmbench.data import layout as L
 from rmbench.policies.act.config import ACTConfig
 from rmbench.policies.nn.embeddings import sincos_1d, sincos_2d
 from rmbench.policies.nn.normalize import Normalizer
@@ -107,8 +106,9 @@ class ACTTrainer(VisuomotorTrainer):
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
         model = self.model
-        tokens = self.observe(batch)[:, -1]
-        state, target, is_pad = batch[L.STATE], self.target(batch), batch["action_is_pad"]
+        tokens, state = self.observe(batch)
+        tokens = tokens[:, -1]
+        target, is_pad = self.target(batch), batch["action_is_pad"]
         z, mu, logvar = model.latent(state, target, is_pad, self.generator)
         keep = (~is_pad).float()[..., None]
         l1 = ((model.decode(tokens, state, z) - target).abs() * keep).sum() / (keep.sum() * ACTION_DIM)

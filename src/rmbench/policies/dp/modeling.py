@@ -68,7 +68,7 @@ class DPTrainer(VisuomotorTrainer):
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
         model = self.model
-        cond = self.observe(batch).flatten(1)
+        cond = self.observe(batch)[0].flatten(1)
         target = self.target(batch)
         b = target.shape[0]
         noise = torch.randn(target.shape, generator=self.generator).to(target.device)

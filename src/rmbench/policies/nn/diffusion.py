@@ -46,12 +46,13 @@ class DDPMSchedule(nn.Module):
         if start is None:
             start = torch.randn(shape, generator=generator, device="cpu")
         x = start.to(device)
-        stride = self.train_steps // steps
-        times = list(range(0, self.train_steps, stride))[::-1][:steps]
+        # floor(i T / steps), from the top: i * stride where steps divides T (diffusers'
+        # "leading" spacing), and still down to t = 0 where it does not
+        times = [i * self.train_steps // steps for i in range(steps)][::-1]
         acp = self.alphas_cumprod.cpu().tolist()
-        for t in times:
+        for i, t in enumerate(times):
             eps = eps_model(x, torch.full((shape[0],), t, device=device, dtype=torch.long))
-            a_t, a_prev = acp[t], (acp[t - stride] if t >= stride else 1.0)
+            a_t, a_prev = acp[t], (acp[times[i + 1]] if i + 1 < steps else 1.0)
             x0 = ((x - math.sqrt(1 - a_t) * eps) / math.sqrt(a_t)).clamp(-1, 1)
             eps = (x - math.sqrt(a_t) * x0) / math.sqrt(1 - a_t)  # consistent with the clipped x0
             x = math.sqrt(a_prev) * x0 + math.sqrt(1 - a_prev) * eps
