@@ -277,6 +277,25 @@ def test_the_registration_alone_says_which_cameras_a_policy_reads():
             registry.POLICIES.pop(name, None)
 
 
+def test_a_checkpoint_is_evaluated_at_the_resolution_it_trained_on(tmp_path):
+    from rmbench.policies import registry
+
+    ckpt = tmp_path / "ckpt"
+    ckpt.mkdir()
+    describe = {"policy": "dp", "config": {"observation": "pixels", "cameras": ["head"]},
+                "dataset": {"resolution": "128x96"}}
+    (ckpt / "config.json").write_text(json.dumps(describe))
+    assert registry.env_options(f"dp:{ckpt}") == {"width": 128, "height": 96,
+                                                  "cameras": ("head",)}
+    del describe["dataset"]  # a checkpoint from before it was recorded: the env's default
+    (ckpt / "config.json").write_text(json.dumps(describe))
+    assert registry.env_options(f"dp:{ckpt}") == {"cameras": ("head",)}
+    describe["config"]["observation"] = "state"  # nothing rendered, no size
+    describe["dataset"] = {"resolution": "128x96"}
+    (ckpt / "config.json").write_text(json.dumps(describe))
+    assert "width" not in registry.env_options(f"dp:{ckpt}")
+
+
 def test_report_renders_markdown_and_html(tmp_path):
     from rmbench.eval.report import write_report
 

@@ -223,3 +223,14 @@ def test_a_state_that_loads_but_is_not_this_runs_is_an_error_naming_it(tmp_path,
                                                  r"resume from"):
         train(Line(), batches, cfg, out, {"policy": "line"}, progress=False,
               write_checkpoint=save_checkpoint)
+
+
+def test_a_state_saved_before_the_description_named_the_resolution_resumes():
+    from rmbench.training.state import run_differences, run_identity
+
+    cfg = TrainConfig(steps=4)
+    now = {"policy": "dp", "dataset": {"path": "/a", "episodes": 2, "resolution": "320x240"}}
+    before = {"policy": "dp", "dataset": {"path": "/b", "episodes": 2}}
+    assert run_differences(run_identity(before, cfg), run_identity(now, cfg)) == ""
+    other = {"policy": "dp", "dataset": {"path": "/a", "episodes": 3, "resolution": "320x240"}}
+    assert run_differences(run_identity(other, cfg), run_identity(now, cfg)) != ""

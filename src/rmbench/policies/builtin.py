@@ -96,15 +96,33 @@ register_policy("replay", "replay a dataset's recorded actions on its own seeds"
                 needs_argument=True, cameras=())(lambda arg, env: ReplayPolicy(arg, env))
 
 
-def _checkpoint_config(arg: str | None) -> dict[str, Any] | None:
-    """The policy config in a learned policy's checkpoint (``CKPT[?options]``), read from its
-    config.json without importing torch; None if unreadable: building the policy then says
-    what is wrong."""
+def _checkpoint_describe(arg: str | None) -> dict[str, Any]:
+    """A learned policy's checkpoint description (``CKPT[?options]``'s config.json), read
+    without importing torch; {} if unreadable: building the policy then says what is wrong."""
     try:
-        config = json.loads((Path(split_argument(arg)[0]) / "config.json").read_text())
-        return config["config"] if isinstance(config["config"], dict) else None
-    except (OSError, ValueError, KeyError, TypeError):
+        describe = json.loads((Path(split_argument(arg)[0]) / "config.json").read_text())
+    except (OSError, ValueError, TypeError):
+        return {}
+    return describe if isinstance(describe, dict) else {}
+
+
+def _checkpoint_config(arg: str | None) -> dict[str, Any] | None:
+    """The policy config in a learned policy's checkpoint; None if unreadable."""
+    config = _checkpoint_describe(arg).get("config")
+    return config if isinstance(config, dict) else None
+
+
+def checkpoint_frame_size(arg: str | None) -> tuple[int, int] | None:
+    """The (width, height) a learned policy's camera frames were rendered at in training (its
+    dataset's resolution), which its evaluation renders at; None where the checkpoint does
+    not say (trained before it was recorded: the env's default, 320x240, as every table's)."""
+    dataset = _checkpoint_describe(arg).get("dataset")
+    text = dataset.get("resolution") if isinstance(dataset, dict) else None
+    try:
+        width, height = (int(v) for v in text.split("x"))
+    except (AttributeError, ValueError):
         return None
+    return width, height
 
 
 def checkpoint_check(policy: str, config: str, extra: tuple[str, ...] = ()):
@@ -165,6 +183,7 @@ def _mem0_reads_simulator(arg: str | None) -> bool:
 
 register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&execute=N&flow_steps=N]",
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
+                frame_size=checkpoint_frame_size,
                 reads_simulator=_mem0_reads_simulator,
                 check=checkpoint_check("mem0", "rmbench.policies.mem0.config.Mem0Config",
                                        ("ablation",)))(_mem0)
@@ -184,7 +203,9 @@ def _act(arg, env):
 
 register_policy("dp", "Diffusion Policy from a checkpoint: dp:CKPT[?execute=N&ddim_steps=N]",
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
+                frame_size=checkpoint_frame_size,
                 check=checkpoint_check("dp", "rmbench.policies.dp.config.DPConfig"))(_dp)
 register_policy("act", "ACT from a checkpoint: act:CKPT[?temporal_ensemble=M&execute=N]",
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
+                frame_size=checkpoint_frame_size,
                 check=checkpoint_check("act", "rmbench.policies.act.config.ACTConfig"))(_act)

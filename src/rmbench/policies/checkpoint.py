@@ -40,6 +40,15 @@ def save_checkpoint(folder: str | Path, model: torch.nn.Module, config: dict[str
     write_json(folder / CONFIG, {**config, "format": FORMAT, "step": step}, indent=2)
 
 
+def dataset_record(ds, path: str | Path) -> dict[str, Any]:
+    """What a checkpoint's description says of the dataset it trained on (a ``Dataset`` read
+    from ``path``): where it was, its size, and the resolution its frames were rendered at,
+    which an evaluation renders at too (``policies.builtin.checkpoint_frame_size``)."""
+    return {"path": str(Path(path).resolve()), "episodes": ds.num_episodes,
+            "frames": ds.num_frames,
+            "resolution": (ds.rmbench.get("collection") or {}).get("resolution")}
+
+
 def read_config(folder: str | Path, policy: str | None = None) -> dict[str, Any]:
     """A checkpoint's config.json (with ``policy``, of that policy, its task and config
     recorded); a one-line CheckpointError naming the file for anything else."""

@@ -58,6 +58,9 @@ class PolicyEntry:
     # from its argument: raise a one-line error where the policy cannot be built from it (a
     # checkpoint that is not there), cheaply and before anything runs
     check: Callable[[str | None], None] | None = None
+    # from its argument: the (width, height) its cameras must render at (a checkpoint's, the
+    # resolution of the frames it trained on), or None for the env's default
+    frame_size: Callable[[str | None], tuple[int, int] | None] | None = None
 
 
 POLICIES: dict[str, PolicyEntry] = {}
@@ -68,13 +71,14 @@ def register_policy(name: str, help: str, needs_argument: bool = False,
                     obs_type: ObsType | None = None,
                     reads_simulator: Callable[[str | None], bool] | None = None,
                     env_options: Callable[[str | None], dict[str, Any]] | None = None,
-                    check: Callable[[str | None], None] | None = None):
+                    check: Callable[[str | None], None] | None = None,
+                    frame_size: Callable[[str | None], tuple[int, int] | None] | None = None):
     def wrap(factory: PolicyFactory) -> PolicyFactory:
         if name in POLICIES:
             raise ValueError(f"policy {name!r} is already registered")
         fixed = tuple(cameras) if cameras is not None and not callable(cameras) else cameras
         POLICIES[name] = PolicyEntry(name, factory, help, needs_argument, fixed, obs_type,
-                                     reads_simulator, env_options, check)
+                                     reads_simulator, env_options, check, frame_size)
         return factory
 
     return wrap
@@ -126,6 +130,9 @@ def _env_options(entry: PolicyEntry, arg: str | None) -> dict[str, Any]:
     cameras = entry.cameras(arg) if callable(entry.cameras) else entry.cameras
     if cameras is not None and not cameras:
         return {**options, "render": False}
+    size = entry.frame_size(arg) if entry.frame_size is not None else None
+    if size is not None:
+        options = {**options, "width": size[0], "height": size[1]}
     return {**options, "cameras": tuple(cameras)} if cameras else options
 
 

@@ -36,6 +36,7 @@ from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import (
     CheckpointError,
     check_task,
+    dataset_record,
     load_weights,
     read_config,
     save_checkpoint,
@@ -218,8 +219,7 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
     cfg = replace(cfg, observation=choose(cfg.observation, ds))
     describe = {"policy": policy, "config": cfg.to_dict(), "task": task.name, "tmc": task.tmc,
                 "gym_id": ds.gym_id,
-                "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
-                            "frames": ds.num_frames}, **features_record(cfg)}
+                "dataset": dataset_record(ds, dataset), **features_record(cfg)}
     if cfg.reads_state:
         describe["state_names"] = ds.state_names
     missing = [] if cfg.reads_state else sorted(set(cfg.cameras) - set(ds.cameras))

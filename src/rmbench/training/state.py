@@ -79,13 +79,16 @@ def run_identity(describe: dict[str, Any], cfg: Any, world: int = 1) -> dict:
 
 def _placeless(identity: dict) -> dict:
     """``identity`` without where the run trained: its device (named by states saved before it
-    was left out) and its dataset's folder (kept in the checkpoint's description)."""
+    was left out) and its dataset's folder (kept in the checkpoint's description); nor the
+    dataset's resolution, which the data's fingerprint holds (states saved before the
+    description said it resume)."""
     out = json.loads(json.dumps(identity))
     for field in PLACE_FIELDS:
         out.get("train", {}).pop(field, None)
     dataset = out.get("describe", {}).get("dataset")
     if isinstance(dataset, dict):
         dataset.pop("path", None)
+        dataset.pop("resolution", None)
     return out
 
 

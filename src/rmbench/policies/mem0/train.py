@@ -25,6 +25,7 @@ from rmbench.machine import describe as describe_machine
 from rmbench.policies.action_space import EE_DIM, EEActions
 from rmbench.policies.checkpoint import (
     CheckpointError,
+    dataset_record,
     read_config,
     read_weights,
     save_checkpoint,
@@ -131,8 +132,7 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
         "gym_id": ds.gym_id,
         "executor_texts": executor_texts, "planner_texts": planner_texts,
         "text_encoder": "learned" if vectors is None else "minilm",
-        "dataset": {"path": str(Path(dataset).resolve()), "episodes": ds.num_episodes,
-                    "frames": ds.num_frames},
+        "dataset": dataset_record(ds, dataset),
         **features_record(cfg),
     }
     if cfg.reads_state:
