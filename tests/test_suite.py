@@ -14,6 +14,7 @@ from rmbench.cli.main import main as cli
 from rmbench.data.reader import Dataset
 from rmbench.eval.chance import chance
 from rmbench.eval.intervals import wilson
+from rmbench.files import read_json_or
 from rmbench.machine import describe, short
 from rmbench.policies.mem0.config import Mem0Config
 from rmbench.suite import (
@@ -245,17 +246,17 @@ def test_a_stage_s_clock_is_kept_while_it_runs(tmp_path):
     """A stage killed after hours keeps its time: the clock is written as the stage runs."""
     import time
 
-    from rmbench.suite.clock import TIMING, read_json, timed
+    from rmbench.suite.clock import TIMING, timed
 
     with timed(tmp_path, "copies_wall_s", every=0.01):
         deadline = time.monotonic() + 5
-        while not read_json(tmp_path / TIMING, {}).get("copies_wall_s"):  # (0.0 at the start)
+        while not read_json_or(tmp_path / TIMING, {}).get("copies_wall_s"):  # (0.0 at the start)
             assert time.monotonic() < deadline, "nothing written while the stage ran"
             time.sleep(0.01)
-    first = read_json(tmp_path / TIMING, {})["copies_wall_s"]
+    first = read_json_or(tmp_path / TIMING, {})["copies_wall_s"]
     with timed(tmp_path, "copies_wall_s"):  # a resumption adds on
         pass
-    timing = read_json(tmp_path / TIMING, {})
+    timing = read_json_or(tmp_path / TIMING, {})
     assert timing["copies_wall_s"] >= first > 0 and len(timing["machines"]) == 1
 
 
@@ -620,7 +621,7 @@ def test_a_stage_resumed_on_another_machine_lists_both(tmp_path, monkeypatch):
     other = {**here, "cores": here["cores"] + 14}  # unlike this one, whatever this one is
     monkeypatch.setattr(clock, "describe", lambda: other)
     clock.add_time(tmp_path, "eval_wall_s", 10.0)
-    timing = clock.read_json(tmp_path / clock.TIMING, {})
+    timing = read_json_or(tmp_path / clock.TIMING, {})
     assert timing == {"eval_wall_s": 100.0, "machines": [here, other]}
 
 

@@ -114,6 +114,15 @@ class FileFormatError(ValueError):
     """A file this rmbench wrote reads back as something else (hand-edited, damaged)."""
 
 
+def read_json_or(path: str | Path, default: Any) -> Any:
+    """The JSON in ``path``, or ``default`` where it is missing or unreadable (a record a
+    stage writes last, read to ask whether the stage is done)."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return default
+
+
 def read_json_object(path: str | Path, keys: tuple[str, ...] = ()) -> dict[str, Any]:
     """The JSON object in ``path``, which must hold ``keys``; a FileFormatError naming the file
     for one that is unreadable, not an object, or lacks one of them."""

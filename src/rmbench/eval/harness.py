@@ -198,6 +198,7 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
                disable=not cfg.progress, dynamic_ncols=True)
     t0 = time.perf_counter()
     kept: set[int] = set()  # the seeds (by place) whose records are in the file
+    f = open(path, "a", encoding="utf-8")  # each record appended, flushed and synced as kept
 
     def keep(i: int, rec: dict[str, Any]) -> None:
         if i in kept:
@@ -237,13 +238,13 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
                                   [i for i, _ in job], as_they_end(job) if here else None))
              for job in jobs)
     try:
-        with open(path, "a", encoding="utf-8") as f:
-            for job, recs in in_order(executor, calls):
-                for (i, _), rec in zip(job, recs, strict=True):
-                    keep(i, rec)
-                bar.set_postfix(success=f"{sum(r['success'] for r in records)}/{len(records)}",
-                                refresh=False)
+        for job, recs in in_order(executor, calls):
+            for (i, _), rec in zip(job, recs, strict=True):
+                keep(i, rec)
+            bar.set_postfix(success=f"{sum(r['success'] for r in records)}/{len(records)}",
+                            refresh=False)
     finally:
+        f.close()
         bar.close()
     log.info("%s: %d episodes in %.1fs", task, n_todo, time.perf_counter() - t0)
     order = {s: k for k, s in enumerate(seeds)}

@@ -79,7 +79,7 @@ def _search(cls, state: dict, path: Path, start: int, episodes: int, executor,
             while (len(pending) < executor.window and candidate < end
                    and len(verified) + len(pending) < episodes):
                 pending.append((candidate, executor.submit(
-                    episode_job, cls.name, "expert", "seen", candidate, False)))
+                    episode_job, cls.name, "expert", "seen", candidate)))
                 candidate += 1
             if not pending:
                 raise RuntimeError(f"{cls.name}: fewer than {episodes} expert-solved seeds "

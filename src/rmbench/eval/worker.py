@@ -64,10 +64,9 @@ def episodes_job(task: str, policy: str, instructions: str, seeds: list[int],
                                positions=positions, on_record=on_record)
 
 
-def episode_job(task: str, policy: str, instructions: str, seed: int, video: bool,
-                memory_reset: str | None = None) -> dict:
-    """One episode's record (the seed search's job)."""
-    return episodes_job(task, policy, instructions, [seed], [video], memory_reset)[0]
+def episode_job(task: str, policy: str, instructions: str, seed: int) -> dict:
+    """One episode's record, without video (the seed search's job)."""
+    return episodes_job(task, policy, instructions, [seed], [False])[0]
 
 
 def close_worker() -> None:

@@ -232,6 +232,8 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
                          cameras=[] if cfg.reads_state or cfg.reads_features else list(cfg.cameras),
                          image_size=cfg.image_size, history=cfg.obs_steps,
                          environment_state=cfg.reads_state)
+    # the joint targets' range is the recorded demonstrations' (measured before any copies),
+    # as Mem-0's
     norm = Normalizer.for_demonstrations(ds.stats, frames.low_dim, cfg.horizon,
                                          cfg.relative_actions)
     model.normalizer.load_state_dict(norm.state_dict())

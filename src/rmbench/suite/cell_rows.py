@@ -9,7 +9,8 @@ from typing import Any
 
 from rmbench.eval.intervals import ci95
 from rmbench.eval.records import read_records
-from rmbench.suite.clock import TIMING, read_json
+from rmbench.files import read_json_or
+from rmbench.suite.clock import TIMING
 from rmbench.suite.plan import Plan, memory_of
 from rmbench.suite.stages import evaluated
 from rmbench.tasks import get_task
@@ -32,8 +33,8 @@ def cell_row(plan: Plan, out: Path, task: str, spec: str) -> dict[str, Any] | No
         return None
     ckpt, evals = plan.train_dir(out, task, spec), plan.eval_dir(out, task, spec)
     cfg = plan.config(task, spec)
-    return {**result_row(result, task, ckpt, evals, read_json(ckpt / TIMING, {}),
-                         read_json(evals / TIMING, {})),
+    return {**result_row(result, task, ckpt, evals, read_json_or(ckpt / TIMING, {}),
+                         read_json_or(evals / TIMING, {})),
             "memory": memory_of(spec, get_task(task).tmc, cfg)}
 
 

@@ -3,7 +3,6 @@ machines it ran on, counted as the stage runs so that a stage killed after hours
 
 from __future__ import annotations
 
-import json
 import threading
 import time
 from contextlib import contextmanager
@@ -16,13 +15,6 @@ TIMING = "timing.json"
 # a task's data stages, shared by its cells (the pixel track's rendered copies and cached
 # features; the state track's solved layout copies)
 DATA_WALLS = ("collect_wall_s", "copies_wall_s", "features_wall_s", "layout_copies_wall_s")
-
-
-def read_json(path: Path, default):
-    try:
-        return json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError):
-        return default
 
 
 @contextmanager

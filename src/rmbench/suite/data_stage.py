@@ -14,9 +14,9 @@ from rmbench.data import CollectConfig, collect
 from rmbench.data.layout_shift import COPIES_SEED, layout_copies_cached, solve_layout_copies
 from rmbench.data.reader import Dataset
 from rmbench.envs.noise import NoiseSpec
-from rmbench.files import write_json
+from rmbench.files import read_json_or, write_json
 from rmbench.identity import differences
-from rmbench.suite.clock import DATA_WALLS, TIMING, read_json, timed
+from rmbench.suite.clock import DATA_WALLS, TIMING, timed
 from rmbench.suite.plan import COLLECT_CAMERAS, Plan, trained_spec
 from rmbench.suite.versions import made_on
 from rmbench.tasks import get_task
@@ -91,7 +91,7 @@ def layout_copy_sets(plan: Plan, task: str) -> list[tuple[int, float]]:
 def copies_done(plan: Plan, out: Path, task: str) -> dict | None:
     """The rendered copies' summary once they are all written (of the plan's demonstrations),
     else None."""
-    summary = read_json(plan.copies_record(out, task), None)
+    summary = read_json_or(plan.copies_record(out, task), None)
     return summary if summary and summary.get("source_episodes") == plan.demos else None
 
 
@@ -120,12 +120,12 @@ def data_progress(plan: Plan, out: Path, task: str) -> tuple[str, float]:
     progress display, which asks it every poll."""
     from rmbench.policies.feature_cache import cached_episodes, default_dir
 
-    made = read_json(plan.data_dir(out, task) / "meta" / "info.json", {})
+    made = read_json_or(plan.data_dir(out, task) / "meta" / "info.json", {})
     demos = min(1.0, made.get("total_episodes", 0) / plan.demos)
     if demos < 1:
         return "demos", demos
     data = plan.train_data_dir(out, task)
-    episodes = read_json(data / "meta" / "info.json", {}).get("total_episodes", 0)
+    episodes = read_json_or(data / "meta" / "info.json", {}).get("total_episodes", 0)
     if plan.rendered_copies and copies_done(plan, out, task) is None:
         # (a copy out of the arms' reach is left out: this part may end short of 100%)
         return "copies", min(1.0, episodes / (plan.demos * (plan.rendered_copies + 1)))
@@ -165,7 +165,7 @@ def collect_stage(plan: Plan, out: Path, task: str, workers: int = 1,
         if not layout_copies_cached(data, n, reach, COPIES_SEED):
             with timed(root.parent, "layout_copies_wall_s"):
                 solve_layout_copies(data, n, reach, COPIES_SEED, workers)
-    ds, timing = Dataset(root), read_json(root.parent / TIMING, {})
+    ds, timing = Dataset(root), read_json_or(root.parent / TIMING, {})
     return {"path": str(root), "episodes": ds.num_episodes, "frames": ds.num_frames,
             "cameras": list(ds.cameras), "resolution": f"{asked.width}x{asked.height}",
             "environment_state": ds.state_names is not None,

@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import Any
 
 from rmbench.eval import EvalConfig, evaluate
-from rmbench.files import write_json
-from rmbench.suite.clock import TIMING, read_json, timed
+from rmbench.files import read_json_or, write_json
+from rmbench.suite.clock import TIMING, timed
 from rmbench.suite.data_stage import data_progress
 from rmbench.suite.plan import Plan, executor_spec, parse_policy, split_seed, trained_spec
 from rmbench.suite.versions import made_on
@@ -27,7 +27,7 @@ def trained(plan: Plan, out: Path, task: str, spec: str) -> bool:
     stage's clock, which ``train_stage`` writes last (a training stopped between its
     checkpoint and its state, or before its bookkeeping, is finished by running it again)."""
     folder = plan.train_dir(out, task, spec)
-    return (read_json(folder / "config.json", {}).get("step") == plan.steps
+    return (read_json_or(folder / "config.json", {}).get("step") == plan.steps
             and (folder / TIMING).exists())
 
 
@@ -36,7 +36,7 @@ def evaluated(plan: Plan, out: Path, task: str, spec: str) -> dict | None:
     task's current version, else None: a report (``--report-only`` moves nothing aside) never
     shows a cell of an earlier version as this version's."""
     folder = plan.eval_dir(out, task, spec)
-    result = read_json(folder / "summary.json", {}).get("tasks", {}).get(task)
+    result = read_json_or(folder / "summary.json", {}).get("tasks", {}).get(task)
     if result is None or result["episodes"] < plan.episodes:
         return None
     return result if made_on(folder, task) in (None, get_task(task).gym_id) else None

@@ -18,10 +18,10 @@ from rmbench.eval.chance import chance
 from rmbench.eval.intervals import difference, format_difference, outside_noise, signed
 from rmbench.eval.published import ablation_names
 from rmbench.eval.report import PUBLISHED, Rate, format_cell, published_source, table
-from rmbench.files import write_atomic, write_json
+from rmbench.files import read_json_or, write_atomic, write_json
 from rmbench.machine import describe, short
 from rmbench.suite.cell_rows import cell_row, pooled_row
-from rmbench.suite.clock import DATA_WALLS, TIMING, read_json
+from rmbench.suite.clock import DATA_WALLS, TIMING
 from rmbench.suite.plan import Plan, applies, split_seed
 from rmbench.suite.progress import column
 from rmbench.tasks import get_task
@@ -42,13 +42,13 @@ def results(plan: Plan, out: Path, command: str = "",
         seeds.setdefault(task, {}).setdefault(base, {})[seed] = cell_row(plan, out, task, spec)
     cells = {task: {base: pooled_row(rows) for base, rows in columns.items()}
              for task, columns in seeds.items()}
-    timing = {t: read_json(Path(out) / t / TIMING, {}) for t in cells}
+    timing = {t: read_json_or(Path(out) / t / TIMING, {}) for t in cells}
     data = {t: {k: timing[t][k] for k in DATA_WALLS if timing[t].get(k) is not None}
             for t in cells}
     levels = {t: asdict(chance(t)) for t in cells}
     return {"command": command, "plan": plan.to_dict(), "cells": cells, "chance": levels,
             "differences": differences(cells), "failed": failed or {},
-            "wall_s": {"table": read_json(Path(out) / TIMING, {}).get("table_wall_s"),
+            "wall_s": {"table": read_json_or(Path(out) / TIMING, {}).get("table_wall_s"),
                        "data": data},
             "machine": describe()}
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rmbench.suite.clock import TIMING, read_json
+from rmbench.files import read_json_or
+from rmbench.suite.clock import TIMING
 from rmbench.suite.plan import Plan
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import recorded_gym_id
@@ -17,10 +18,10 @@ def made_on(folder: Path, task: str) -> str | None:
     ``<task>/version.json``); None for a folder that holds none of them yet."""
     folder = Path(folder)
     for path in (folder / "meta" / "rmbench.json", folder / "config.json"):
-        record = read_json(path, None)
+        record = read_json_or(path, None)
         if isinstance(record, dict) and record:
             return recorded_gym_id(task, record)
-    record = read_json(folder / task / "version.json", None)
+    record = read_json_or(folder / task / "version.json", None)
     if isinstance(record, dict) and record.get("gym_id"):
         return record["gym_id"]
     if (folder / task / "episodes.jsonl").exists():  # (episodes from before versions were kept)
