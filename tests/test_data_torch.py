@@ -43,6 +43,10 @@ def test_frame_cache_serves_resized_frames_from_disk(demos):
     assert isinstance(frames, np.memmap) and frames.shape[1:] == (32, 48, 3)
     again = DemoDataset(demos.ds, image_size=(32, 48), cache_dir=demos.cache.dir)
     assert torch.equal(again[3]["observation.images.head"], demos[3]["observation.images.head"])
+    # another size given the same folder is decoded anew, never served the stored one
+    other = DemoDataset(demos.ds, image_size=(16, 24), cache_dir=demos.cache.dir)
+    assert other.cache.frames(0, "head").shape[1:] == (16, 24, 3)
+    assert demos.cache.frames(0, "head").shape[1:] == (32, 48, 3)  # (its open map)
 
 
 def test_sampler_walks_each_slot_through_episodes_in_order(demos):

@@ -40,17 +40,31 @@ class FrameCache:
         key = (episode, camera)
         if key not in self._open:
             path = self._path(episode, camera)
-            if not path.exists():
+            stored = self._stored(path, episode)
+            if stored is None:
                 save_atomic(path, self._decode(episode, camera))
-            self._open[key] = np.load(path, mmap_mode="r")
+                stored = np.load(path, mmap_mode="r")
+            self._open[key] = stored
         return self._open[key]
 
     def read_once(self, episode: int, camera: str) -> np.ndarray:
         """The same frames for a reader that needs them once (the feature cache): from the
         stored file if there is one, else decoded now and not stored. Stored, the frames of
         450 episodes of three cameras at 96x128 take 18 GB."""
-        path = self._path(episode, camera)
-        return np.load(path, mmap_mode="r") if path.exists() else self._decode(episode, camera)
+        stored = self._stored(self._path(episode, camera), episode)
+        return self._decode(episode, camera) if stored is None else stored
+
+    def _stored(self, path: Path, episode: int) -> np.ndarray | None:
+        """The stored frames at ``path`` if they are this episode's at this size: a file of
+        another size (two sizes given one ``cache_dir``), length or type is decoded again."""
+        if not path.exists():
+            return None
+        try:
+            frames = np.load(path, mmap_mode="r")
+        except (OSError, ValueError):
+            return None
+        shape = (int(self.ds.lengths[episode]), *(self.size or frames.shape[1:3]), 3)
+        return frames if frames.dtype == np.uint8 and frames.shape == shape else None
 
     def _decode(self, episode: int, camera: str) -> np.ndarray:
         frames = self.ds.episode(episode, cameras=[camera]).frames[camera]
