@@ -105,6 +105,33 @@ def test_cover_blocks_sequence_and_wrong_state():
     assert ev.failure and "000 -> 010" in ev.failure_reason
 
 
+def test_cover_blocks_judges_what_the_cameras_see_not_a_tolerance():
+    """A cover set down 2.3 cm off its block's centre (diagonally; the cup leaves 1.8 cm a
+    side) still encloses it: covered, and hidden from the state observation as from the head
+    camera. A block turned onto another face is no failure; a cover tipped is."""
+    env, task = task_env("cover_blocks", seed=6)
+    cube, cover = task.cubes[0], task.covers[0]
+    cover.place(task.data, cube.pos(task.data)[:2] + (0.016, 0.016))
+    settle(env)
+    assert abs(cover.pos(task.data)[2] - TABLE_TOP) < 0.005  # down on the table, around it
+    assert task.settled_state() == "100" and task.hidden_by_cover(cube)
+    assert task.environment_state()[list(task.state_names).index("cube_left_visible")] == 0.0
+    ev = task.evaluate()
+    assert ev.stage == 1 and not ev.failure
+    env, task = task_env("cover_blocks", seed=6)
+    half = np.sqrt(0.5)  # a quarter turn about x: another face down
+    task.data.qpos[task.cubes[1].qpos_adr + 3: task.cubes[1].qpos_adr + 7] = (half, half, 0, 0)
+    settle(env)
+    assert not task.cubes[1].upright(task.data, 0.5) and task.cubes[1].on_a_face(task.data, 0.5)
+    assert not task.evaluate().failure
+    cover = task.covers[2]  # laid on its side, clear of the blocks
+    cover.place(task.data, cover.pos(task.data)[:2] + (0, 0.05), z=TABLE_TOP + 0.05)
+    task.data.qpos[cover.qpos_adr + 3: cover.qpos_adr + 7] = (half, half, 0, 0)
+    settle(env, 600)
+    assert not cover.upright(task.data, 0.5) and cover.speed(task.data) < 0.02
+    assert "knocked over" in task.evaluate().failure_reason
+
+
 def insert(task, k, orientation):
     yaw = np.pi / 2 if orientation == 0 else -np.pi / 2
     task.batteries[k].place(task.data, task.holder.slot(task.model, k), yaw=yaw)

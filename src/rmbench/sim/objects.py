@@ -102,6 +102,11 @@ class Cube(FreePiece):
     def rest_height(self) -> float:
         return self.size / 2
 
+    def on_a_face(self, data: mujoco.MjData, tol: float = 0.1) -> bool:
+        """Resting square on one of its six faces, within ``tol`` rad: for a cube of one colour
+        what ``upright`` is for other pieces (a cube turned onto another face looks the same)."""
+        return bool(np.abs(data.xmat[self.body_id][6:9]).max() > np.cos(tol))
+
     def _geoms(self, body) -> None:
         h = self.size / 2
         body.add_geom(name=f"{self.name}/geom", type=BOX, size=[h, h, h], rgba=list(self.rgba),
@@ -126,6 +131,14 @@ class Cover(FreePiece):
     @property
     def rest_height(self) -> float:
         return 0.0
+
+    def around(self, data: mujoco.MjData, point: np.ndarray) -> bool:
+        """Whether ``point`` (xy) lies within the cup's inner square, in the cup's own frame:
+        a cube whose centre does, under a cover that stands down on the table, is enclosed
+        (the walls could not stand across it)."""
+        rot = data.xmat[self.body_id].reshape(3, 3)
+        local = rot[:2, :2].T @ (np.asarray(point[:2]) - self.pos(data)[:2])
+        return bool(np.all(np.abs(local) < self.inner / 2))
 
     def knob_centre(self, data: mujoco.MjData) -> np.ndarray:
         return self.pos(data) + (0, 0, self.height + self.knob / 2)

@@ -10,8 +10,11 @@ of the six; covers 0.13 m behind their blocks; yaws ~ U[-0.2, 0.2].
 
 Success: the covered/uncovered state of the blocks (left, middle, right; settled states
 only, while no cover is held) runs exactly 000 -> 100 -> 110 -> 111 -> (red uncovered) ->
-(green uncovered) -> (blue uncovered).
-Failure: any other settled state; a block or cover off the table or knocked over.
+(green uncovered) -> (blue uncovered). A block is covered where a cover stands down on the
+table with the block's centre inside its cup (the cup is 7.6 cm across, the block 4 cm).
+Failure: any other settled state; a block or cover off the table; a cover knocked over, or a
+block resting on an edge or against something (a block turned onto another face, all of one
+colour, is as good as upright).
 Progress per stage: 0, 0.05, 0.1, 0.15, 0.3, 0.6, 1.0.
 
 Memory: TMC M(n). Aliasing point: with all three covered the colours are invisible; the robot
@@ -42,18 +45,18 @@ COLOURS = {"red": (0.85, 0.1, 0.1, 1.0), "green": (0.1, 0.7, 0.2, 1.0),
 ORDERS = tuple(itertools.permutations(COLOURS))
 SPACING = 0.2
 BEHIND = 0.13
-COVERED_TOL = 0.02
 PROGRESS = (0.0, 0.05, 0.1, 0.15, 0.3, 0.6, 1.0)
-# A cover this close (xy) over a cube, its rim lower than the cube's top, hides the cube from
-# the head camera (its segmentation shows no cube pixel once the rim is 3 cm up).
-HIDDEN_XY = 0.02
+DOWN = 0.01  # a cover's bottom this close to the table stands on it
+# A cover over a cube (the cube's centre inside its cup), its rim lower than the cube's top,
+# hides the cube from the head camera (its segmentation shows no cube pixel once the rim is
+# 3 cm up).
 HIDDEN_RIM = 0.04
 
 
 @register
 class CoverBlocks(Task):
     name = "cover_blocks"
-    gym_id = "rmbench/CoverBlocks-v2"
+    gym_id = "rmbench/CoverBlocks-v3"
     tmc = "M(n)"
     step_limit = 1500
     # Subtasks name the cover to move by where it stands, as a plan step is carried out: the
@@ -141,9 +144,9 @@ class CoverBlocks(Task):
     def hidden_by_cover(self, cube: Cube) -> bool:
         """Whether a cover hides the cube from the head camera: one stands over it, its rim
         lower than the cube's top."""
-        xy = cube.pos(self.data)[:2]
-        return any(np.linalg.norm(c.pos(self.data)[:2] - xy) <= HIDDEN_XY
-                   and c.pos(self.data)[2] - TABLE_TOP < HIDDEN_RIM for c in self.covers)
+        centre = cube.pos(self.data)
+        return any(c.around(self.data, centre) and c.pos(self.data)[2] - TABLE_TOP < HIDDEN_RIM
+                   for c in self.covers)
 
     def environment_state(self) -> np.ndarray:
         d, parts = self.data, []
@@ -165,9 +168,9 @@ class CoverBlocks(Task):
                 return None
         bits = []
         for cube in self.cubes:
-            xy = cube.pos(self.data)[:2]
-            bits.append(any(np.linalg.norm(c.pos(self.data)[:2] - xy) < COVERED_TOL
-                            and c.pos(self.data)[2] < TABLE_TOP + 0.01 for c in self.covers))
+            centre = cube.pos(self.data)
+            bits.append(any(c.around(self.data, centre) and c.pos(self.data)[2] < TABLE_TOP + DOWN
+                            for c in self.covers))
         return "".join("1" if b else "0" for b in bits)
 
     def evaluate(self) -> Evaluation:
@@ -183,7 +186,9 @@ class CoverBlocks(Task):
         if self.wrong_state:
             reason = (f"cover state went {self.state} -> {self.wrong_state}; expected "
                       f"{self.sequence[stage + 1] if stage + 1 < len(self.sequence) else 'none'}")
-        elif any(not p.upright(self.data, 0.5) for p in self.pieces if p.speed(self.data) < 0.02
+        elif any(not (p.on_a_face(self.data, 0.5) if isinstance(p, Cube) else
+                      p.upright(self.data, 0.5))
+                 for p in self.pieces if p.speed(self.data) < 0.02
                  and not self.touched_by_fingers(p.body_id)):
             reason = "a block or cover was knocked over"
         elif min(p.pos(self.data)[2] for p in self.pieces) < TABLE_TOP - 0.05:

@@ -35,7 +35,8 @@ def ordered() -> list[type[Task]]:
 # version they were made on, where that is not the current one (CHANGELOG.md, 2026-11-28 and
 # 2026-11-29).
 UNRECORDED_VERSIONS = {"battery_try": "rmbench/BatteryTry-v1", "swap_blocks": "rmbench/SwapBlocks-v1",
-                       "rearrange_blocks": "rmbench/RearrangeBlocks-v1"}
+                       "rearrange_blocks": "rmbench/RearrangeBlocks-v1",
+                       "cover_blocks": "rmbench/CoverBlocks-v1"}
 
 
 def recorded_gym_id(task: str, record: dict) -> str:
