@@ -136,3 +136,23 @@ def test_remote_env_is_built_from_the_greeting(tmp_path):
     finally:
         for s in servers.values():
             s.stop()
+
+
+def test_a_served_policy_s_frames_render_at_its_resolution():
+    register_policy("small_frames_test", "test policy reading 128x96 head frames",
+                    cameras=("head",), frame_size=lambda arg: (128, 96))(
+        lambda arg, env: BasePolicy())
+    try:
+        assert env_options("small_frames_test") == {"width": 128, "height": 96,
+                                                    "cameras": ("head",)}
+        server = PolicyServer("small_frames_test", TASK, port=0).start()
+        try:
+            url = f"remote:ws://127.0.0.1:{server.port}"
+            assert env_options(url) == {"obs_type": "pixels_agent_pos", "cameras": ("head",),
+                                        "width": 128, "height": 96}
+        finally:
+            server.stop()
+        with pytest.raises(ValueError, match=r"reads 128x96 frames, larger than frame_max"):
+            PolicyServer("small_frames_test", TASK, port=0, frame_max=(64, 64))
+    finally:
+        POLICIES.pop("small_frames_test", None)

@@ -330,3 +330,9 @@ def test_serve_cli_refuses_bad_flags_in_one_line(capsys):
     with pytest.raises(SystemExit):
         main(["serve", "--policy", "random", "--task", TASK, "--frame-max", "640"])
     assert "expected HEIGHTxWIDTH" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("timeout", [0, -1, float("nan"), float("inf"), 1e10])
+def test_an_idle_timeout_the_socket_cannot_hold_is_refused(timeout):
+    with pytest.raises(ValueError, match=r"idle_timeout in \(0, 1e\+06\] seconds"):
+        PolicyServer("random", TASK, port=0, idle_timeout=timeout)

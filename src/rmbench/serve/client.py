@@ -29,7 +29,7 @@ from websockets.sync.client import connect
 from rmbench.policies.base import BasePolicy, PolicyUnavailable
 from rmbench.policies.registry import register_policy
 from rmbench.serve import openpi
-from rmbench.serve.wire import MAX_MESSAGE_BYTES, PROTOCOL, pack, unpack
+from rmbench.serve.wire import MAX_MESSAGE_BYTES, PROTOCOL, REPLY, pack, unpack
 
 ADAPTERS = ("auto", "rmbench", "openpi")
 
@@ -73,10 +73,12 @@ class RemotePolicy(BasePolicy):
                 compression=None))
         except OSError as err:  # (refused, no such host): the address said with the reason
             raise PolicyUnavailable(f"{self.url}: {err.strerror or err}") from None
-        except (InvalidHandshake, InvalidURI) as err:  # (something else answers there)
+        # (something else answers there; a peer that closes mid-handshake, such as a banner
+        # and a close, reads as a closed connection or as a bad handshake depending on timing)
+        except (InvalidHandshake, InvalidURI, ConnectionClosed) as err:
             raise PolicyUnavailable(f"{self.url} is not a websocket server: {err}") from None
         try:
-            metadata = unpack(self.ws.recv(timeout=self.timeout))
+            metadata = unpack(self.ws.recv(timeout=self.timeout), REPLY)
         except (TimeoutError, ConnectionClosed) as err:
             self._disconnect()
             raise PolicyUnavailable(f"{self.url} sent no greeting: {type(err).__name__}: "
@@ -137,7 +139,7 @@ class RemotePolicy(BasePolicy):
         if isinstance(raw, str):  # (openpi's server sends its error as text, then closes)
             self._disconnect()
             return raw
-        return unpack(raw)
+        return unpack(raw, REPLY)
 
     def reset(self, instruction: str, task_info: dict[str, Any]) -> None:
         self.prompt = instruction
@@ -186,10 +188,18 @@ class RemotePolicy(BasePolicy):
         if self.adapter == "openpi":
             return {"cameras": tuple(openpi.CAMERA_KEYS)}
         obs_type = self.metadata.get("obs_type", "pixels_agent_pos")
+        if not isinstance(obs_type, str):
+            raise RuntimeError(f"{self.url}: the greeting's obs_type is not a name: "
+                               f"{obs_type!r:.60}")
         if not obs_type.startswith("pixels"):
             return {"obs_type": obs_type}
-        return ({"obs_type": obs_type, "cameras": self.served_cameras} if self.served_cameras
-                else {"obs_type": obs_type, "render": False})
+        if not self.served_cameras:
+            return {"obs_type": obs_type, "render": False}
+        size = self.metadata.get("frame_size")  # (a server before it said one: the default)
+        if isinstance(size, list) and len(size) == 2 and all(type(v) is int for v in size):
+            return {"obs_type": obs_type, "cameras": self.served_cameras,
+                    "width": size[0], "height": size[1]}
+        return {"obs_type": obs_type, "cameras": self.served_cameras}
 
     def close(self) -> None:
         self._disconnect()

@@ -45,10 +45,17 @@ class Contract:
     state_dim: int | None  # None: the policy reads no environment_state
     frame_max: tuple[int, int] = FRAME_MAX
     batch: int = 0  # slots per connection; 0: the policy plays one episode at a time
+    # (W, H) the policy's frames are rendered at (its training data's), None: the env's default
+    frame_size: tuple[int, int] | None = None
 
     def __post_init__(self):
         if len(self.frame_max) != 2 or min(self.frame_max) < 1:
             raise ValueError(f"frame_max must be (H, W) >= 1, got {self.frame_max}")
+        if self.frame_size is not None and (self.frame_size[1] > self.frame_max[0]
+                                            or self.frame_size[0] > self.frame_max[1]):
+            w, h = self.frame_size
+            raise ValueError(f"the policy reads {w}x{h} frames, larger than frame_max "
+                             f"{self.frame_max[0]}x{self.frame_max[1]} (H x W)")
         if not 0 <= self.batch <= MAX_SLOTS:
             raise ValueError(f"batch must be in [0, {MAX_SLOTS}], got {self.batch}")
 
@@ -77,7 +84,8 @@ class Contract:
     def greeting(self) -> dict[str, Any]:
         return {"obs_type": self.obs_type, "cameras": list(self.cameras),
                 "frame_max": list(self.frame_max), "state_dim": self.state_dim,
-                "max_message_bytes": self.max_message_bytes, "batch": self.batch}
+                "max_message_bytes": self.max_message_bytes, "batch": self.batch,
+                "frame_size": list(self.frame_size) if self.frame_size else None}
 
     def slots_for(self, wanted: int = MAX_SLOTS) -> int:
         """The slots to announce for a batched policy: ``wanted``, fewer where a batch of

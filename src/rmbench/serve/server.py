@@ -47,6 +47,7 @@ from rmbench.tasks import get_task
 
 log = logging.getLogger(__name__)
 MAX_QUEUE = 2  # messages read ahead per connection; a client waits for each reply anyway
+MAX_IDLE_TIMEOUT = 1e6  # seconds (11.6 days)
 
 
 def fork(policy):
@@ -82,9 +83,11 @@ class PolicyServer:
             raise ValueError(f"policy {policy!r} cannot be served: it reads the simulator "
                              f"(privileged state or the true subtask boundary), which a client "
                              f"sends no part of")
-        if max_connections < 1 or not idle_timeout > 0:
-            raise ValueError(f"max_connections must be >= 1 and idle_timeout > 0, got "
-                             f"{max_connections} and {idle_timeout}")
+        # (a timeout near infinity overflows the socket's clock: every connection would fail)
+        if max_connections < 1 or not 0 < idle_timeout <= MAX_IDLE_TIMEOUT:
+            raise ValueError(f"max_connections must be >= 1 and idle_timeout in (0, "
+                             f"{MAX_IDLE_TIMEOUT:g}] seconds, got {max_connections} and "
+                             f"{idle_timeout}")
         if not 1 <= max_slots <= MAX_SLOTS:
             raise ValueError(f"max_slots must be in [1, {MAX_SLOTS}], got {max_slots}")
         self.spec, self.task, self.host, self.port = policy, get_task(task).name, host, port
@@ -99,9 +102,10 @@ class PolicyServer:
         self.env = make(self.task, render=False, obs_type=obs_type)
         self.policy = make_policy(policy, self.env)
         state = "environment_state" in obs_type
+        size = (options["width"], options["height"]) if cameras and "width" in options else None
         self.contract = Contract(self.task, obs_type, cameras,
                                  len(get_task(task).state_names) if state else None,
-                                 tuple(frame_max))
+                                 tuple(frame_max), frame_size=size)
         if batches(self.policy):  # the cap grows with the slots, so they are announced
             self.contract = replace(self.contract, batch=self.contract.slots_for(max_slots))
         self._infer = threading.Lock()  # one inference at a time on the shared model

@@ -45,7 +45,11 @@ class Limits:
     text: int = 4096
 
 
-TRUSTED = Limits(items=2**31, depth=512, text=MAX_MESSAGE_BYTES)  # a reply from our own server
+TRUSTED = Limits(items=2**31, depth=512, text=MAX_MESSAGE_BYTES)  # a message this process made
+# What a client reads from a server, which may be any program at the address it was given: a
+# greeting and replies of action chunks, statuses and an error text hold far fewer values,
+# and a reply of millions of empty maps must not cost gigabytes to refuse.
+REPLY = Limits(items=2**16, depth=32, text=2**20)
 
 
 def _encode(obj):
