@@ -199,5 +199,22 @@ def test_a_reset_that_fails_leaves_no_episode_to_step():
         env.reset(seed=1, options={"hiden": {"original_mat": "left"}})
     env.reset(seed=1, options={"hidden": {"original_mat": "left"}})
     env.step(obs["agent_pos"])
+    for bad, said in ((["hidden"], "options must be a map"), ({"hidden": ["left"]},
+                                                             "hidden must be a map")):
+        with pytest.raises(ValueError, match=said):
+            env.reset(seed=1, options=bad)
     with pytest.raises(ValueError, match="cameras=\\('head',\\)"):
         rmbench.make("put_back_block", cameras="head")
+
+
+@pytest.mark.parametrize("task", ["battery_try", "cover_blocks", "blocks_ranking_try"])
+def test_an_episode_s_hidden_facts_fix_another_s_as_reported(task):
+    """``info["hidden"]``'s settable facts (as JSON lists) given back as the hidden option
+    set the same facts."""
+    env = rmbench.make(task, render=False)
+    _, info = env.reset(seed=3)
+    fixed = {k: v for k, v in info["hidden"].items() if k in rmbench.TASKS[task].hidden_keys}
+    assert fixed and any(isinstance(v, list) for v in fixed.values())
+    _, again = env.reset(seed=11, options={"hidden": fixed})
+    assert {k: again["hidden"][k] for k in fixed} == fixed
+    env.close()

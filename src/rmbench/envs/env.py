@@ -119,6 +119,9 @@ class RMBenchEnv(gym.Env):
         # until this reset has finished, no episode runs: a reset that fails (a hidden value
         # the task refuses) leaves no half-reset episode for step() to go on with
         self._done = True
+        if options is not None and not isinstance(options, dict):
+            raise ValueError(f"options must be a map of {list(RESET_OPTIONS)}, got "
+                             f"{type(options).__name__}")
         unknown = sorted(map(str, set(options or {}) - set(RESET_OPTIONS)))
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; options: {list(RESET_OPTIONS)}")

@@ -7,6 +7,7 @@ import numpy as np
 
 
 def quat_z(yaw: float) -> np.ndarray:
+    """A turn of ``yaw`` about the vertical axis."""
     return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
 
 
@@ -37,11 +38,6 @@ def look_at_quat(pos, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     x /= np.linalg.norm(x)
     y = np.cross(-forward, x)
     return mat_to_quat(np.stack([x, y, -forward], axis=1))
-
-
-def yaw_of(mat: np.ndarray) -> float:
-    """Heading of a body's x axis in the horizontal plane."""
-    return float(np.arctan2(mat[1, 0], mat[0, 0]))
 
 
 def wrap_angle(a: float) -> float:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from rmbench.sim.geometry import quat_z
 from rmbench.sim.station import TABLE_TOP
 
 BOX = mujoco.mjtGeom.mjGEOM_BOX
@@ -66,7 +67,7 @@ class FreePiece:
     def place(self, data: mujoco.MjData, xy, yaw: float = 0.0, z: float | None = None) -> None:
         z = TABLE_TOP + self.rest_height if z is None else z
         data.qpos[self.qpos_adr: self.qpos_adr + 3] = (xy[0], xy[1], z)
-        data.qpos[self.qpos_adr + 3: self.qpos_adr + 7] = (np.cos(yaw / 2), 0, 0, np.sin(yaw / 2))
+        data.qpos[self.qpos_adr + 3: self.qpos_adr + 7] = quat_z(yaw)
         data.qvel[self.qvel_adr: self.qvel_adr + 6] = 0.0
 
     def pos(self, data: mujoco.MjData) -> np.ndarray:
@@ -331,4 +332,4 @@ class Shape(FreePiece):
     def show_at(self, model: mujoco.MjModel, xyz, yaw: float) -> None:
         """Place the fixed display copy with its bottom at height ``xyz[2]``."""
         model.body_pos[self.body_id] = (xyz[0], xyz[1], xyz[2] + self._rest)
-        model.body_quat[self.body_id] = (np.cos(yaw / 2), 0, 0, np.sin(yaw / 2))
+        model.body_quat[self.body_id] = quat_z(yaw)

@@ -128,8 +128,6 @@ class Task:
                          for side in ("left", "right") for f in ("left", "right")}
         self._arm_qpos = np.array([model.joint(f"{side}/{joint}").qposadr[0]
                                    for side in robot.SIDES for joint in robot.ARM_JOINTS])
-        self._arm_dof = np.array([model.joint(f"{side}/{joint}").dofadr[0]
-                                  for side in robot.SIDES for joint in robot.ARM_JOINTS])
         self._home_qpos = np.concatenate([HOME_ARM[side] for side in robot.SIDES])
 
     def initialize(self, rng: np.random.Generator) -> None:
@@ -161,6 +159,9 @@ class Task:
     # -- shared helpers -----------------------------------------------------------------
     def set_overrides(self, hidden: dict[str, Any] | None) -> None:
         """Fix hidden variables for the next episode (see ``hidden_keys``)."""
+        if hidden is not None and not isinstance(hidden, dict):
+            raise ValueError(f"hidden must be a map of {list(self.hidden_keys)} to values, got "
+                             f"{type(hidden).__name__}")
         hidden = dict(hidden or {})
         unknown = sorted(set(hidden) - set(self.hidden_keys))
         if unknown:
@@ -173,7 +174,7 @@ class Task:
         shift), unless the caller fixed ``key``; a fixed value must be one of ``allowed``."""
         if key not in self.overrides:
             return drawn
-        value = self.overrides[key]
+        value = _tuples(self.overrides[key])  # (``hidden_state`` says them as JSON lists)
         if allowed is not None and value not in allowed:
             raise ValueError(f"{self.name}: hidden {key}={value!r} is not one of {list(allowed)}")
         return value
@@ -230,3 +231,7 @@ class Task:
                 return True
         return False
 
+
+def _tuples(value):
+    """``value`` with its lists (nested too) as tuples, the form a task's choices take."""
+    return tuple(_tuples(v) for v in value) if isinstance(value, list | tuple) else value
