@@ -113,7 +113,10 @@ class LayoutShift:
         return out.astype(np.float32)
 
     def shift(self, ep: Episode, delta) -> Episode | None:
-        """``ep`` with its scene moved by ``delta`` (dx, dy metres); None if out of reach."""
+        """``ep`` with its scene moved by ``delta`` (dx, dy metres); None if out of reach.
+        Its ``ee_pose`` stays the source's: an in-memory copy is trained on and never
+        written, and no policy reads the column (grasp poses come from the joints'
+        kinematics); the rendered copies written to disk record their own."""
         delta = np.asarray(delta, np.float64)
         state = self._joints(ep.state, delta)
         action = None if state is None else self._joints(ep.action, delta)

@@ -158,6 +158,10 @@ class DemoDataset(torch.utils.data.Dataset):
             raise ValueError("episodes added in memory have no frames: read the dataset "
                              "without cameras to add them")
         self.low_dim += episodes
+        # a copy keeps its source's dataset index (so ``episode_index`` in a batch names the
+        # recorded episode it came from, not a unique one): nothing may read frames or cached
+        # features by it, which copies do not have (frames are refused above; a policy
+        # config that reads pixels refuses layout_copies)
         self.episode_ids += [ep.index for ep in episodes]
         self.task_index += [self.ds.instructions.index(ep.instruction) for ep in episodes]
         self._index()
