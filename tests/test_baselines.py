@@ -396,6 +396,38 @@ def test_state_baseline_trains_without_frames(name, dataset, tmp_path, monkeypat
     assert np.mean(rows[-10:]) < ratio * np.mean(rows[:5]), (rows[:5], rows[-10:])
 
 
+def test_act_s_decoder_and_latent_read_the_noisy_joints(dataset):
+    """With joint_noise, what ACT's decoder and latent encoder are given is the noisy read of
+    the joints, the one its observation encoder saw, not the recorded joints."""
+    from rmbench.data.reader import Dataset
+    from rmbench.policies.act.modeling import ACTModel, ACTTrainer
+    from rmbench.training.batches import batch_stream
+
+    ds = Dataset(dataset)
+    names = tuple(ds.state_names)
+    cfg = replace(state_cfg("act"), joint_noise=0.02)
+    model = ACTModel(cfg, len(names))
+    frames = DemoDataset(ds, chunk=cfg.horizon, cameras=[], history=cfg.obs_steps,
+                         environment_state=True)
+    batch = next(batch_stream(frames, RandomFrameSampler(frames, 16, seed=0), 0))
+    seen = {}
+    real_latent, real_decode = model.latent, model.decode
+
+    def latent(state, *args):
+        seen["latent"] = state
+        return real_latent(state, *args)
+
+    def decode(tokens, state, z):
+        seen["decode"] = state
+        return real_decode(tokens, state, z)
+
+    model.latent, model.decode = latent, decode
+    ACTTrainer(model, 0, names).forward(batch)
+    recorded = batch[L.STATE].reshape(seen["decode"].shape)
+    assert torch.equal(seen["latent"], seen["decode"])
+    assert float((seen["decode"] - recorded)[:, :6].std()) == pytest.approx(0.02, rel=0.3)
+
+
 @pytest.mark.parametrize("name", sorted(BASELINES))
 def test_state_noise_reaches_the_baselines_encoder(name, dataset):
     """DP and ACT train with Mem-0's state_noise: the encoder reads the environment state's

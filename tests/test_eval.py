@@ -123,10 +123,13 @@ def test_a_folder_is_evaluated_by_one_process_and_a_seed_counts_once(tmp_path):
         evaluate(cfg(tmp_path, policy="random"))
     path = out / TASK / "episodes.jsonl"
     lines = path.read_text().splitlines(keepends=True)
-    path.write_text("".join(lines + lines[:1]))  # a seed recorded twice (an older folder)
+    twice = json.loads(lines[0])  # a seed recorded twice (an older folder), told apart
+    twice["success"], twice["reason"] = not twice["success"], "timeout"
+    path.write_text("".join(lines) + json.dumps(twice) + "\n")
     again = evaluate(cfg(tmp_path, policy="random"))
     assert again["tasks"][TASK]["episodes"] == summary["tasks"][TASK]["episodes"]
     assert again["tasks"][TASK]["successes"] == summary["tasks"][TASK]["successes"]
+    assert read_records(path)[0] == json.loads(lines[0])  # the first, for every reader
 
 
 def test_sigkill_and_resume_gives_exactly_n_unique_episodes(tmp_path):
@@ -180,6 +183,7 @@ def test_episodes_recorded_before_versions_were_kept_count_as_that_version(tmp_p
 
     assert recorded_gym_id("battery_try", {}) == "rmbench/BatteryTry-v1"
     assert recorded_gym_id("swap_blocks", {}) == "rmbench/SwapBlocks-v1"
+    assert recorded_gym_id("cover_blocks", {}) == "rmbench/CoverBlocks-v1"  # (DP, ACT: before v2)
     assert recorded_gym_id("swap_blocks", {"gym_id": "rmbench/SwapBlocks-v2"}) == "rmbench/SwapBlocks-v2"
     (tmp_path / "episodes.jsonl").write_text('{"seed": 1, "success": false, "reason": "timeout", '
                                               '"progress": 0.0}\n')

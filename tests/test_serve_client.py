@@ -10,7 +10,7 @@ from rmbench.envs.registration import make
 from rmbench.eval import EvalConfig, evaluate
 from rmbench.eval.episode import run_policy_episode
 from rmbench.eval.records import read_records
-from rmbench.policies.base import BasePolicy
+from rmbench.policies.base import BasePolicy, PolicyUnavailable
 from rmbench.policies.registry import POLICIES, env_options, make_policy, register_policy
 from rmbench.serve.client import RemotePolicy
 from rmbench.serve.server import PolicyServer
@@ -18,7 +18,7 @@ from rmbench.tasks import get_task
 from tests.conftest import DATA_TASK as TASK
 
 SLOW = 9.0  # an agent_pos[0] the echo policy answers late
-DELAY = 1.0
+DELAY = 2.0  # s; a prompt reply has half of it (a loaded machine answers in time)
 
 
 class SlowEcho(BasePolicy):
@@ -63,7 +63,7 @@ def slow_server():
 
 
 def test_a_timeout_never_yields_the_late_action(slow_server):
-    policy = RemotePolicy(f"ws://127.0.0.1:{slow_server.port}", timeout=DELAY / 4)
+    policy = RemotePolicy(f"ws://127.0.0.1:{slow_server.port}", timeout=DELAY / 2)
     try:
         policy.reset("", {"seed": 0})
         first = np.arange(14.0)
@@ -83,7 +83,7 @@ def test_a_timeout_never_yields_the_late_action(slow_server):
 
 def test_a_timeout_ends_that_episode_and_the_next_is_exact(slow_server):
     env = make(TASK, render=False)
-    policy = RemotePolicy(f"ws://127.0.0.1:{slow_server.port}", timeout=DELAY / 4)
+    policy = RemotePolicy(f"ws://127.0.0.1:{slow_server.port}", timeout=DELAY / 2)
     try:
         late = run_policy_episode(env, policy, seed=7)
         assert late["reason"] == "policy_error" and "no reply within" in late["message"]
@@ -156,3 +156,29 @@ def test_a_served_policy_s_frames_render_at_its_resolution():
             PolicyServer("small_frames_test", TASK, port=0, frame_max=(64, 64))
     finally:
         POLICIES.pop("small_frames_test", None)
+
+
+@pytest.mark.parametrize("greeting, said", [
+    (b"\x91" * 40 + b"\x90", "does not read"),  # nested 40 deep: past the client's limits
+    ({"server": "rmbench", "protocol": 2, "obs_type": "pixels_agent_pos",
+      "cameras": ["head"], "frame_size": [0, 0]}, "frame_size is not"),
+])
+def test_a_greeting_the_client_cannot_read_is_one_line(greeting, said):
+    import threading
+
+    from websockets.sync.server import serve
+
+    from rmbench.serve.wire import pack
+
+    def handle(ws):
+        ws.send(greeting if isinstance(greeting, bytes) else pack(greeting))
+        for _ in ws:
+            pass
+
+    server = serve(handle, "127.0.0.1", 0, compression=None)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        with pytest.raises((RuntimeError, ValueError, PolicyUnavailable), match=said):
+            env_options(f"remote:ws://127.0.0.1:{server.socket.getsockname()[1]}")
+    finally:
+        server.shutdown()

@@ -40,7 +40,7 @@ class FrameCache:
         key = (episode, camera)
         if key not in self._open:
             path = self._path(episode, camera)
-            stored = self._stored(path, episode)
+            stored = self._stored(path, episode, camera)
             if stored is None:
                 save_atomic(path, self._decode(episode, camera))
                 stored = np.load(path, mmap_mode="r")
@@ -51,19 +51,21 @@ class FrameCache:
         """The same frames for a reader that needs them once (the feature cache): from the
         stored file if there is one, else decoded now and not stored. Stored, the frames of
         450 episodes of three cameras at 96x128 take 18 GB."""
-        stored = self._stored(self._path(episode, camera), episode)
+        stored = self._stored(self._path(episode, camera), episode, camera)
         return self._decode(episode, camera) if stored is None else stored
 
-    def _stored(self, path: Path, episode: int) -> np.ndarray | None:
-        """The stored frames at ``path`` if they are this episode's at this size: a file of
-        another size (two sizes given one ``cache_dir``), length or type is decoded again."""
+    def _stored(self, path: Path, episode: int, camera: str) -> np.ndarray | None:
+        """The stored frames at ``path`` if they are this episode's at this size (the
+        dataset's own, where none is asked): a file of another size (two sizes given one
+        ``cache_dir``), length or type is decoded again."""
         if not path.exists():
             return None
         try:
             frames = np.load(path, mmap_mode="r")
         except (OSError, ValueError):
             return None
-        shape = (int(self.ds.lengths[episode]), *(self.size or frames.shape[1:3]), 3)
+        size = self.size or tuple(self.ds.features[L.image_key(camera)]["shape"][:2])
+        shape = (int(self.ds.lengths[episode]), *size, 3)
         return frames if frames.dtype == np.uint8 and frames.shape == shape else None
 
     def _decode(self, episode: int, camera: str) -> np.ndarray:

@@ -333,7 +333,9 @@ class DatasetWriter:
         mark = self.root / L.RMBENCH
         for path in [p for p in self.root.iterdir() if p.name != WRITING and p != mark.parent]:
             _delete(path)
-        if mark.parent.is_dir():
+        if mark.parent.is_symlink():  # (a link is removed, never what it points to)
+            mark.parent.unlink()
+        elif mark.parent.is_dir():
             for path in [p for p in mark.parent.iterdir() if p != mark]:
                 _delete(path)
             mark.unlink(missing_ok=True)

@@ -84,7 +84,8 @@ def boundary_counts(records: list[dict]) -> dict[str, Any] | None:
     if not any(e[1] == "policy" and e[2] == "subtask_ends" for r in records
                for e in r.get("events", [])):
         return None
-    whole = [r for r in records if not any(e[2] == "left_out" for e in r.get("events", []))]
+    whole = [r for r in records
+             if not any(e[1:3] == ["events", "left_out"] for e in r.get("events", []))]
     capped, records = len(records) - len(whole), whole
     counts: Counter = Counter()
     first_wrong: Counter = Counter()

@@ -184,11 +184,8 @@ def _run_episodes(cfg: EvalConfig, task: str, folder: Path, seeds: list[int],
     """The seeds' episodes not yet recorded, into the ordinary arm or ``probe``'s (whose
     episodes keep no video: the ordinary arm's show the same layouts)."""
     path = folder / (arm_file(probe.name) if probe else "episodes.jsonl")
-    records, done = [], set()
-    for r in read_records(path, repair=True):  # each seed's first record (folders written
-        if r["seed"] in seeds and r["seed"] not in done:  # before the lock may hold two)
-            records.append(r)
-            done.add(r["seed"])
+    records = [r for r in read_records(path, repair=True) if r["seed"] in seeds]
+    done = {r["seed"] for r in records}
     todo = [(i, s) for i, s in enumerate(seeds) if s not in done]
     n_todo = len(todo)
     n = job_count(cfg, task, len(todo), executor) if todo else 0
@@ -261,8 +258,9 @@ JOB_BATCHES = 4
 def job_count(cfg: EvalConfig, task: str, todo: int, executor) -> int:
     """Worker jobs for ``todo`` seeds: one a seed for a policy without the batched form (its
     records are written as each episode ends, as before batches), else a multiple of
-    ``workers`` jobs of at most ``JOB_BATCHES`` batches each, split evenly, so that no worker
-    is left with a short last job while another runs a full one."""
+    ``workers`` jobs (one a seed where fewer seeds are left) of at most ``JOB_BATCHES``
+    batches each, split evenly, so that no worker is left with a short last job while another
+    runs a full one."""
     if cfg.batch == 1 or not executor.submit(policy_batches, task, cfg.policy,
                                              cfg.instructions).result():
         return todo

@@ -29,11 +29,13 @@ def read_records(path: Path, repair: bool = False) -> list[dict]:
     mid-line leaves no newline after it): that line is left out, and with ``repair`` (the
     evaluation about to append) cut off the file. Any other line that is not a record is an
     EvalError naming the file and line, and the file is left as it is: a damaged middle is
-    never cut away with the complete records after it."""
+    never cut away with the complete records after it. A seed is one episode: where a file
+    holds it twice (two runs appending before evaluations took a lock), its first record is
+    the one read, by every reader alike."""
     if not path.exists():
         return []
     data = path.read_bytes()
-    records, good = [], 0
+    records, good, seen = [], 0, set()
     lines = data.splitlines(keepends=True)
     for n, line in enumerate(lines, 1):
         if not line.endswith(b"\n") and n == len(lines):
@@ -46,7 +48,9 @@ def read_records(path: Path, repair: bool = False) -> list[dict]:
             raise EvalError(f"{path}: line {n} is not an episode record (a record is one JSON "
                             f"object a line with {', '.join(RECORD_KEYS)}); mend or move the "
                             f"file") from None
-        records.append(record)
+        if record["seed"] not in seen:
+            seen.add(record["seed"])
+            records.append(record)
         good += len(line)
     if good < len(data) and repair:
         log.warning("%s: dropping a torn last record (its writer was stopped)", path)

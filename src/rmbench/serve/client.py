@@ -29,7 +29,7 @@ from websockets.sync.client import connect
 from rmbench.policies.base import BasePolicy, PolicyUnavailable
 from rmbench.policies.registry import register_policy
 from rmbench.serve import openpi
-from rmbench.serve.wire import MAX_MESSAGE_BYTES, PROTOCOL, REPLY, pack, unpack
+from rmbench.serve.wire import MAX_MESSAGE_BYTES, PROTOCOL, REPLY, WireError, pack, unpack
 
 ADAPTERS = ("auto", "rmbench", "openpi")
 
@@ -82,6 +82,10 @@ class RemotePolicy(BasePolicy):
         except (TimeoutError, ConnectionClosed) as err:
             self._disconnect()
             raise PolicyUnavailable(f"{self.url} sent no greeting: {type(err).__name__}: "
+                                    f"{err}") from None
+        except WireError as err:
+            self._disconnect()
+            raise PolicyUnavailable(f"{self.url} sent a greeting this client does not read: "
                                     f"{err}") from None
         except Exception:
             self._disconnect()
@@ -196,10 +200,14 @@ class RemotePolicy(BasePolicy):
         if not self.served_cameras:
             return {"obs_type": obs_type, "render": False}
         size = self.metadata.get("frame_size")  # (a server before it said one: the default)
-        if isinstance(size, list) and len(size) == 2 and all(type(v) is int for v in size):
-            return {"obs_type": obs_type, "cameras": self.served_cameras,
-                    "width": size[0], "height": size[1]}
-        return {"obs_type": obs_type, "cameras": self.served_cameras}
+        if size is None:
+            return {"obs_type": obs_type, "cameras": self.served_cameras}
+        if not (isinstance(size, list) and len(size) == 2
+                and all(type(v) is int and 16 <= v <= 4096 for v in size)):
+            raise RuntimeError(f"{self.url}: the greeting's frame_size is not [W, H] in pixels: "
+                               f"{size!r:.60}")
+        return {"obs_type": obs_type, "cameras": self.served_cameras,
+                "width": size[0], "height": size[1]}
 
     def close(self) -> None:
         self._disconnect()

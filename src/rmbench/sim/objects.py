@@ -133,13 +133,14 @@ class Cover(FreePiece):
     def rest_height(self) -> float:
         return 0.0
 
-    def around(self, data: mujoco.MjData, point: np.ndarray) -> bool:
-        """Whether ``point`` (xy) lies within the cup's inner square, in the cup's own frame:
-        a cube whose centre does, under a cover that stands down on the table, is enclosed
-        (the walls could not stand across it)."""
+    def around(self, data: mujoco.MjData, point: np.ndarray, margin: float = 0.0) -> bool:
+        """Whether ``point`` (xy) lies within the cup's inner square less ``margin`` a side,
+        in the cup's own frame (1 mm of play): with a cube's half edge as the margin, whether
+        the cube fits inside, which it always does under a cover that stands down on the
+        table (the walls could not stand across it)."""
         rot = data.xmat[self.body_id].reshape(3, 3)
         local = rot[:2, :2].T @ (np.asarray(point[:2]) - self.pos(data)[:2])
-        return bool(np.all(np.abs(local) < self.inner / 2))
+        return bool(np.all(np.abs(local) <= self.inner / 2 - margin + 1e-3))
 
     def knob_centre(self, data: mujoco.MjData) -> np.ndarray:
         return self.pos(data) + (0, 0, self.height + self.knob / 2)

@@ -11,7 +11,7 @@ of the six; covers 0.13 m behind their blocks; yaws ~ U[-0.2, 0.2].
 Success: the covered/uncovered state of the blocks (left, middle, right; settled states
 only, while no cover is held) runs exactly 000 -> 100 -> 110 -> 111 -> (red uncovered) ->
 (green uncovered) -> (blue uncovered). A block is covered where a cover stands down on the
-table with the block's centre inside its cup (the cup is 7.6 cm across, the block 4 cm).
+table around it (the cup is 7.6 cm across, the block 4 cm: up to 1.8 cm off centre a side).
 Failure: any other settled state; a block or cover off the table; a cover knocked over, or a
 block resting on an edge or against something (a block turned onto another face, all of one
 colour, is as good as upright).
@@ -47,7 +47,7 @@ SPACING = 0.2
 BEHIND = 0.13
 PROGRESS = (0.0, 0.05, 0.1, 0.15, 0.3, 0.6, 1.0)
 DOWN = 0.01  # a cover's bottom this close to the table stands on it
-# A cover over a cube (the cube's centre inside its cup), its rim lower than the cube's top,
+# A cover over a cube (the cube inside its cup's square), its rim lower than the cube's top,
 # hides the cube from the head camera (its segmentation shows no cube pixel once the rim is
 # 3 cm up).
 HIDDEN_RIM = 0.04
@@ -144,9 +144,9 @@ class CoverBlocks(Task):
     def hidden_by_cover(self, cube: Cube) -> bool:
         """Whether a cover hides the cube from the head camera: one stands over it, its rim
         lower than the cube's top."""
-        centre = cube.pos(self.data)
-        return any(c.around(self.data, centre) and c.pos(self.data)[2] - TABLE_TOP < HIDDEN_RIM
-                   for c in self.covers)
+        centre, half = cube.pos(self.data), cube.size / 2
+        return any(c.around(self.data, centre, half)
+                   and c.pos(self.data)[2] - TABLE_TOP < HIDDEN_RIM for c in self.covers)
 
     def environment_state(self) -> np.ndarray:
         d, parts = self.data, []
@@ -168,9 +168,9 @@ class CoverBlocks(Task):
                 return None
         bits = []
         for cube in self.cubes:
-            centre = cube.pos(self.data)
-            bits.append(any(c.around(self.data, centre) and c.pos(self.data)[2] < TABLE_TOP + DOWN
-                            for c in self.covers))
+            centre, half = cube.pos(self.data), cube.size / 2
+            bits.append(any(c.around(self.data, centre, half)
+                            and c.pos(self.data)[2] < TABLE_TOP + DOWN for c in self.covers))
         return "".join("1" if b else "0" for b in bits)
 
     def evaluate(self) -> Evaluation:

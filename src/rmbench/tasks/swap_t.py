@@ -9,8 +9,8 @@ of the stem) at x = -0.09 and +0.09, each plus U[-0.01, 0.01], y ~ U[-0.15, -0.1
 
 Success: each T within 2.5 cm (xy) and 15 degrees of the other's starting pose, resting on
 the table, neither touched by a finger, after the plan's lifts: the left T raised 5 cm off
-the table, then the right one (each T is carried to its place; one pushed along the table
-there does not count).
+the table, then the right one (a T never lifted, only pushed along the table into place,
+does not count).
 Failure: a T off the table or tipped over on the table.
 
 Memory: TMC M(1). Aliasing point: once both are lifted (and held in a fixed carrying pose),
