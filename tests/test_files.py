@@ -50,3 +50,15 @@ def test_a_lock_refuses_a_second_holder_or_waits_for_it(tmp_path):
     waiter.join(5)
     assert got and not waiter.is_alive()
     got[0].close()
+
+
+def test_a_stage_record_that_is_not_an_object_reads_as_absent(tmp_path):
+    from rmbench.files import read_json_or
+
+    path = tmp_path / "timing.json"
+    assert read_json_or(path, {}) == {}  # missing
+    for text in ("null", "[1, 2]", "{bad", "\xff"):
+        path.write_text(text, encoding="latin-1")
+        assert read_json_or(path, {}) == {} and read_json_or(path, None) is None
+    path.write_text('{"step": 3}')
+    assert read_json_or(path, {}) == {"step": 3}

@@ -115,12 +115,13 @@ class FileFormatError(ValueError):
 
 
 def read_json_or(path: str | Path, default: Any) -> Any:
-    """The JSON in ``path``, or ``default`` where it is missing or unreadable (a record a
-    stage writes last, read to ask whether the stage is done)."""
+    """The JSON object in ``path``, or ``default`` where it is missing, unreadable or not an
+    object (a record a stage writes last, read to ask whether the stage is done)."""
     try:
-        return json.loads(Path(path).read_text())
+        value = json.loads(Path(path).read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         return default
+    return value if isinstance(value, dict) else default
 
 
 def read_json_object(path: str | Path, keys: tuple[str, ...] = ()) -> dict[str, Any]:
