@@ -10,7 +10,6 @@ interrupted searches skip what is known; a longer list extends the cached one.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 from collections import deque
@@ -19,7 +18,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from rmbench.eval.worker import close_worker, episode_job
-from rmbench.files import lock, write_json
+from rmbench.files import lock, read_json_or, write_json
 from rmbench.parallel import Inline
 from rmbench.seeds import SPLIT_STRIDE, eval_seed_start
 from rmbench.tasks import get_task
@@ -50,12 +49,13 @@ def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = Non
 
 
 def _cached(path: Path, cls, seed: int) -> dict:
-    """The seed cache at ``path``, or an empty one."""
+    """The seed cache at ``path``, or an empty one (where it is missing or not a cache)."""
+    cached = read_json_or(path, None)
+    if cached is not None and isinstance(cached.get("verified"), list) and isinstance(
+            cached.get("rejected"), list):
+        return cached
     if path.exists():
-        try:
-            return json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError):
-            log.warning("ignoring unreadable seed cache %s", path)
+        log.warning("ignoring unreadable seed cache %s", path)
     return {"task": cls.name, "gym_id": cls.gym_id, "seed": seed, "verified": [], "rejected": []}
 
 
