@@ -290,6 +290,11 @@ def test_toy_table_end_to_end_and_resumed(toy_table, capsys):
         assert row["episodes"] == 1 and 0 <= row["success_rate"] <= 1 and row["train_wall_s"] > 0
         # each wall time says where it was measured: this machine, once
         assert row["machines"] == {"train": [describe()], "eval": [describe()]}
+    # each checkpoint says the resolution of its training frames, which evaluation renders at
+    collected = Dataset(out / "observe_and_pickup" / "data").rmbench["collection"]["resolution"]
+    configs = list((out / "observe_and_pickup" / "train").glob("*/config.json"))
+    assert configs and all(json.loads(c.read_text())["dataset"]["resolution"] == collected
+                           for c in configs)
     text = (out / "table.md").read_text()
     assert "| observe_and_pickup | M(1) |" in text and "(published)" in text
     assert f"stages ran on {short(describe())}." in text
