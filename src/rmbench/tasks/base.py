@@ -139,6 +139,10 @@ class Task:
         """Called after every physics step."""
 
     def evaluate(self) -> Evaluation:
+        """The episode's standing after a control step. Not a pure query: the env calls it
+        once per control step (and once at reset), and tasks advance their own records in it
+        (a try counted, a stage latched, a settling window filled), so a second call in one
+        step would count that step twice: the step's info holds what it returned."""
         raise NotImplementedError
 
     def plan(self) -> list[int]:
