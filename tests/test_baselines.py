@@ -317,8 +317,10 @@ def test_baseline_through_the_evaluation_harness(ckpt, tmp_path):
     from rmbench.eval.records import read_records
 
     name, path = ckpt
-    # the env renders the cameras the checkpoint was trained on, read from its config.json
-    assert env_options(f"{name}:{path}") == {"cameras": ("head", "left_wrist")}
+    # the env renders the cameras the checkpoint was trained on, at the resolution of their
+    # frames (the test dataset's 64x48), read from its config.json
+    assert env_options(f"{name}:{path}") == {"cameras": ("head", "left_wrist"), "width": 64,
+                                             "height": 48}
     evaluate(EvalConfig(("observe_and_pickup",), f"{name}:{path}", tmp_path / "e", episodes=1,
                         video="none", progress=False, seed_cache=tmp_path / "seeds"))
     (rec,) = read_records(tmp_path / "e" / "observe_and_pickup" / "episodes.jsonl")

@@ -100,7 +100,7 @@ def test_an_episode_is_read_only_from_its_own_whole_data_file(copied, damage, sa
 
 @pytest.mark.parametrize("name, value, said", [
     ("tasks", [], r"'tasks' holds 0 texts"),
-    ("rmbench/hidden", "{bad", r"'rmbench/hidden' is not JSON"),
+    ("rmbench/hidden", "{bad", r"rmbench/hidden is not JSON"),
 ])
 def test_an_episode_record_of_bad_values_is_named(copied, name, value, said):
     path = copied / L.episodes_file(1)

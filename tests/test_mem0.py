@@ -468,8 +468,9 @@ def test_checkpoint_round_trip_gives_identical_actions(mn_ckpt):
     env.close()
     np.testing.assert_array_equal(runs_[0], runs_[1])
     assert runs_[0].shape == (6, 14) and np.isfinite(runs_[0]).all()
-    # its env renders the cameras the checkpoint was trained on, read from its config.json
-    assert env_options(f"mem0:{mn_ckpt}") == {"cameras": TINY.cameras}
+    # its env renders the cameras the checkpoint was trained on, at their frames' resolution
+    # (the test dataset's 64x48), read from its config.json
+    assert env_options(f"mem0:{mn_ckpt}") == {"cameras": TINY.cameras, "width": 64, "height": 48}
 
 
 def test_bad_checkpoints_give_one_line_errors(mn_ckpt, tmp_path):

@@ -258,7 +258,7 @@ class Dataset:
             try:
                 json.loads(row["rmbench/hidden"])
             except json.JSONDecodeError as err:
-                raise DatasetError(f"{path}: 'rmbench/hidden' is not JSON ({err})") from None
+                raise DatasetError(f"{path}: rmbench/hidden is not JSON ({err})") from None
             rows.append(row)
         return rows
 

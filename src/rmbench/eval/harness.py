@@ -131,8 +131,12 @@ def evaluate(cfg: EvalConfig) -> dict[str, Any]:
     except Locked as err:
         raise EvalError(f"{out} is being evaluated by another process ({err.holder or '?'}); "
                         f"wait for it, or evaluate into another --out") from None
-    with held:
-        check_identity(out, cfg.identity())
+    try:
+        try:
+            check_identity(out, cfg.identity())
+        except Exception:  # a folder it refuses is left as it was
+            (out / LOCK).unlink(missing_ok=True)
+            raise
         results = {}
         for task in cfg.tasks:
             results[task] = _evaluate_task(cfg, task, out / task)
@@ -140,6 +144,9 @@ def evaluate(cfg: EvalConfig) -> dict[str, Any]:
                    "tasks": {t: r.__dict__ for t, r in results.items()}}
         write_json(out / "summary.json", summary, indent=2)
         write_atomic(out / "summary.md", summary_markdown(summary).encode())
+        (out / LOCK).unlink(missing_ok=True)  # (a finished folder keeps no lock file)
+    finally:
+        held.close()
     return summary
 
 
