@@ -144,9 +144,15 @@ class CoverBlocks(Task):
     def hidden_by_cover(self, cube: Cube) -> bool:
         """Whether a cover hides the cube from the head camera: one stands over it, its rim
         lower than the cube's top."""
+        return self.cover_over(cube, HIDDEN_RIM)
+
+    def cover_over(self, cube: Cube, below: float) -> bool:
+        """Whether a cover stands around ``cube`` (the cube inside its cup's square) with its
+        rim less than ``below`` over the table: hiding it (``HIDDEN_RIM``), or down on the
+        table (``DOWN``), covering it."""
         centre, half = cube.pos(self.data), cube.size / 2
-        return any(c.around(self.data, centre, half)
-                   and c.pos(self.data)[2] - TABLE_TOP < HIDDEN_RIM for c in self.covers)
+        return any(c.around(self.data, centre, half) and c.pos(self.data)[2] - TABLE_TOP < below
+                   for c in self.covers)
 
     def environment_state(self) -> np.ndarray:
         d, parts = self.data, []
@@ -166,12 +172,7 @@ class CoverBlocks(Task):
         for cover in self.covers:
             if cover.speed(self.data) > 0.02 or self.touched_by_fingers(cover.body_id):
                 return None
-        bits = []
-        for cube in self.cubes:
-            centre, half = cube.pos(self.data), cube.size / 2
-            bits.append(any(c.around(self.data, centre, half)
-                            and c.pos(self.data)[2] < TABLE_TOP + DOWN for c in self.covers))
-        return "".join("1" if b else "0" for b in bits)
+        return "".join("1" if self.cover_over(cube, DOWN) else "0" for cube in self.cubes)
 
     def evaluate(self) -> Evaluation:
         state = self.settled_state()
