@@ -5,7 +5,7 @@ demonstration, all in one run.
     .venv/bin/python benchmarks/collect_speed.py [--task put_back_block] [--episodes 50]
         [--workers 2] [--single 8] [--out FILE]
 
-Target (issue 4): 50 demonstrations of put_back_block with three 320x240 cameras in <= 5 min
+Target: 50 demonstrations of put_back_block with three 320x240 cameras in <= 5 min
 on 2 cores; recorder overhead <= 1.3x. Prints a table and writes JSON (default
 benchmarks/results/collect_speed.json).
 """

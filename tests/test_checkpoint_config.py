@@ -68,3 +68,19 @@ def test_a_config_takes_numpy_numbers_as_their_builtin_types_and_refuses_other_t
                       ({"dim": "x"}, "dim must be int, got str")):
         with pytest.raises(ValueError, match=said):
             ACTConfig(**bad)
+
+
+@pytest.mark.parametrize("name, config", [
+    ("mem0", "rmbench.policies.mem0.config.Mem0Config"),
+    ("dp", "rmbench.policies.dp.config.DPConfig"),
+    ("act", "rmbench.policies.act.config.ACTConfig"),
+])
+def test_a_learned_policys_help_names_each_option_its_argument_takes(name, config):
+    import importlib
+
+    from rmbench.policies.registry import POLICIES
+
+    module, cls = config.rsplit(".", 1)
+    fields = getattr(importlib.import_module(module), cls).INFERENCE_FIELDS
+    help_text = POLICIES[name].help
+    assert [f for f in fields if f not in help_text] == []

@@ -181,7 +181,9 @@ def _mem0_reads_simulator(arg: str | None) -> bool:
     return "gt_classifier" in query.get("ablation", "").split(",")
 
 
-register_policy("mem0", "Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&execute=N&flow_steps=N]",
+register_policy("mem0", ("Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&F=V...], F one of execute, "
+                 "flow_steps, sample_noise, temporal_ensemble, ensemble_every, event_phases, "
+                 "codec_frames"),
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
                 frame_size=checkpoint_frame_size,
                 reads_simulator=_mem0_reads_simulator,
@@ -205,7 +207,8 @@ register_policy("dp", "Diffusion Policy from a checkpoint: dp:CKPT[?execute=N&dd
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
                 frame_size=checkpoint_frame_size,
                 check=checkpoint_check("dp", "rmbench.policies.dp.config.DPConfig"))(_dp)
-register_policy("act", "ACT from a checkpoint: act:CKPT[?temporal_ensemble=M&execute=N]",
+register_policy("act", ("ACT from a checkpoint: "
+                "act:CKPT[?temporal_ensemble=M&execute=N&ensemble_window=K]"),
                 needs_argument=True, obs_type=checkpoint_obs_type, cameras=checkpoint_cameras,
                 frame_size=checkpoint_frame_size,
                 check=checkpoint_check("act", "rmbench.policies.act.config.ACTConfig"))(_act)

@@ -165,7 +165,6 @@ class Button(StaticPiece):
     armed: bool = True
     released_at: float | None = None  # when the cap last came back above release_depth
     qpos_adr: int = -1
-    just_pressed: bool = False
 
     def build(self, spec: mujoco.MjSpec) -> None:
         base = spec.worldbody.add_body(name=self.name, pos=[0, 0, TABLE_TOP])
@@ -193,7 +192,6 @@ class Button(StaticPiece):
         self.count = 0
         self.armed = True
         self.released_at = None
-        self.just_pressed = False
 
     def depth(self, data: mujoco.MjData) -> float:
         return float(-data.qpos[self.qpos_adr])
@@ -203,14 +201,15 @@ class Button(StaticPiece):
         x, y, z = model.body_pos[self.body_id]
         return np.array([x, y, z + self.base_height + self.cap_height])
 
-    def update(self, data: mujoco.MjData) -> None:
-        """Call after every physics step: counts a press on the way down."""
+    def update(self, data: mujoco.MjData) -> bool:
+        """Call after every physics step: counts a press on the way down, and says whether
+        this step counted one (a task judges a press by the scene at that moment)."""
         d = self.depth(data)
         if self.armed and d >= self.press_depth:
             self.count += 1
             self.armed = False
-            self.just_pressed = True
-        elif not self.armed:
+            return True
+        if not self.armed:
             if d > self.release_depth:
                 self.released_at = None
             elif self.released_at is None:
@@ -218,6 +217,7 @@ class Button(StaticPiece):
             elif data.time - self.released_at >= self.rearm_time:
                 self.armed = True
                 self.released_at = None
+        return False
 
 
 # Seven-segment layout: segment -> (centre x, centre y, horizontal?) in units of the digit

@@ -29,6 +29,7 @@ from rmbench.sim.station import HOME_ARM, TABLE_TOP
 # not read per step: the collection's executed action noise (white, 0.02 rad) keeps an arm
 # at home 0.02-0.03 rad from it at any one step and moving at 0.3-0.6 rad/s, while its
 # 0.5-s average stays within 0.003-0.007 (0.0002-0.0006 without the noise).
+FELL_BELOW = 0.05  # m under the table top: a piece's centre there has left the table
 HOME_WINDOW = 10
 HOME_JOINT_TOL = 0.01
 
@@ -192,6 +193,11 @@ class Task:
         self._stage = max(self._stage, stage)
         self._best_progress = max(self._best_progress, progress)
         return self._stage, self._best_progress
+
+    def fell_off(self, pieces) -> bool:
+        """Some piece's centre lies more than ``FELL_BELOW`` under the table top: it is off
+        the table (a failure of every task)."""
+        return min(p.pos(self.data)[2] for p in pieces) < TABLE_TOP - FELL_BELOW
 
     def released(self, piece) -> bool:
         """The piece rests on the table, still, and no finger touches it."""

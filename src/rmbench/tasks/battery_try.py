@@ -187,7 +187,7 @@ class BatteryTry(Task):
                 break
             self.cursor += 1
         reason = ""
-        if min(b.pos(self.data)[2] for b in self.batteries) < TABLE_TOP - 0.05:
+        if self.fell_off(self.batteries):
             reason = "a battery fell off the table"
         success = lit and not reason
         stage, progress = self.advance(self.cursor, self.cursor / len(plan), solved=success)

@@ -33,7 +33,6 @@ import numpy as np
 
 from rmbench.sim.fixtures import Button, Lamp
 from rmbench.sim.objects import Cube
-from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.randomization import Uniform
@@ -185,9 +184,7 @@ class BlocksRankingTry(Task):
         return tuple(out)
 
     def on_substep(self) -> None:
-        self.button.update(self.data)
-        if self.button.just_pressed:
-            self.button.just_pressed = False
+        if self.button.update(self.data):
             row = self.row()
             self.pressed.append(row)
             self.lamp.set(self.model, "green" if row == self.target else "red")
@@ -201,7 +198,6 @@ class BlocksRankingTry(Task):
                                             for c in self.cubes):
             self.lamp.set(self.model, "off")  # a verdict holds until the row is touched
         row = self.row()
-        zs = sorted(c.pos(self.data)[2] for c in self.cubes)
         self.is_stacked = self.is_stacked or self.stacked(self.cubes)
         solved = bool(self.pressed) and self.pressed[-1] == self.target and row == self.target
         # Ground-truth stage: a swap ends when the next row of the sequence stands in the
@@ -213,7 +209,7 @@ class BlocksRankingTry(Task):
         reason = ""
         if self.is_stacked:
             reason = "a cube was left resting on another"
-        elif zs[0] < TABLE_TOP - 0.05:
+        elif self.fell_off(self.cubes):
             reason = "a cube fell off the table"
         success = solved and not reason
         stage, progress = self.advance(self.cursor, self.cursor / len(plan), solved=success)

@@ -192,7 +192,7 @@ class CoverBlocks(Task):
                  for p in self.pieces if p.speed(self.data) < 0.02
                  and not self.touched_by_fingers(p.body_id)):
             reason = "a block or cover was knocked over"
-        elif min(p.pos(self.data)[2] for p in self.pieces) < TABLE_TOP - 0.05:
+        elif self.fell_off(self.pieces):
             reason = "a block or cover fell off the table"
         stage, progress = self.advance(stage, PROGRESS[stage])
         preds = {"cover_state": self.state, "settled_state": state or "",

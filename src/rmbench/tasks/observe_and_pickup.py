@@ -202,7 +202,7 @@ class ObserveAndPickup(Task):
         elif wrong:
             other = self.objects[wrong[0]]
             reason = f"picked up a wrong object ({other.colour} {other.shape})"
-        elif min(o.pos(d)[2] for o in self.objects) < TABLE_TOP - 0.05:
+        elif self.fell_off(self.objects):
             reason = "an object fell off the table"
         stage = 2 if lifted else 1 if self.screen_up else 0
         stage, progress = self.advance(stage, 1.0 if stage == 2 else 0.0)

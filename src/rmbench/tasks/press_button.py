@@ -124,9 +124,7 @@ class PressButton(Task):
 
     def on_substep(self) -> None:
         for name, button in self.buttons.items():
-            button.update(self.data)
-            if button.just_pressed:
-                button.just_pressed = False
+            if button.update(self.data):
                 self.events.append(name)
 
     def evaluate(self) -> Evaluation:

@@ -23,7 +23,6 @@ import numpy as np
 
 from rmbench.sim.fixtures import Button, Mat
 from rmbench.sim.objects import Cube
-from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.randomization import Uniform
@@ -113,9 +112,7 @@ class PutBackBlock(Task):
         return bool(np.linalg.norm(self.cube.pos(self.data)[:2] - self.centre) <= CENTRE_TOL)
 
     def on_substep(self) -> None:
-        self.button.update(self.data)
-        if self.button.just_pressed:
-            self.button.just_pressed = False
+        if self.button.update(self.data):
             if self.button.count == 1 and self.cube_at_centre():
                 self.pressed_at_centre = True
             else:
@@ -129,7 +126,6 @@ class PutBackBlock(Task):
         return None
 
     def evaluate(self) -> Evaluation:
-        pos = self.cube.pos(self.data)
         settled = self.released(self.cube)
         at_centre = self.cube_at_centre()
         presses = self.button.count
@@ -145,7 +141,7 @@ class PutBackBlock(Task):
             reason = "button pressed before the block was at the centre"
         elif presses == 1 and settled and on_mat not in (None, self.original):
             reason = f"block put back on the wrong mat ({on_mat} instead of {self.original})"
-        elif pos[2] < TABLE_TOP - 0.05:
+        elif self.fell_off((self.cube,)):
             reason = "block fell off the table"
         stage = 0
         if at_centre and settled:

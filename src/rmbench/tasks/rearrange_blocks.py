@@ -29,7 +29,6 @@ import numpy as np
 
 from rmbench.sim.fixtures import Button, Mat
 from rmbench.sim.objects import Cube
-from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.randomization import Uniform
@@ -143,9 +142,7 @@ class RearrangeBlocks(Task):
                 and self._near(b, self.mat_slot(self.empty)) and self.released(b))
 
     def on_substep(self) -> None:
-        self.button.update(self.data)
-        if self.button.just_pressed:
-            self.button.just_pressed = False
+        if self.button.update(self.data):
             if self.button.count == 1 and self.blocks_on_mats():
                 self.pressed_on_mats = True
             else:
@@ -169,7 +166,7 @@ class RearrangeBlocks(Task):
             reason = "button pressed before both blocks were on the mats"
         elif self.pressed_on_mats and b_middle:
             reason = "moved the wrong block back to the middle"
-        elif min(a.pos(self.data)[2], b.pos(self.data)[2]) < TABLE_TOP - 0.05:
+        elif self.fell_off((a, b)):
             reason = "a block fell off the table"
         stage = 0
         if on_mats:

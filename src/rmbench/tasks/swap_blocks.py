@@ -28,7 +28,6 @@ import numpy as np
 
 from rmbench.sim.fixtures import Button, Tray
 from rmbench.sim.objects import Cube
-from rmbench.sim.station import TABLE_TOP
 from rmbench.tasks import state as S
 from rmbench.tasks.base import Evaluation, Task
 from rmbench.tasks.randomization import Uniform
@@ -145,9 +144,7 @@ class SwapBlocks(Task):
         return (self.tray_of(self.cubes[0]), self.tray_of(self.cubes[1])) == (second, first)
 
     def on_substep(self) -> None:
-        self.button.update(self.data)
-        if self.button.just_pressed:
-            self.button.just_pressed = False
+        if self.button.update(self.data):
             if self.button.count == 1 and self.swapped():
                 self.swapped_at_press = True
             else:
@@ -168,7 +165,7 @@ class SwapBlocks(Task):
             reason = "button pressed more than once"
         elif self.early_press:
             reason = "button pressed before the swap was complete"
-        elif min(c.pos(self.data)[2] for c in self.cubes) < TABLE_TOP - 0.05:
+        elif self.fell_off(self.cubes):
             reason = "a cube fell off the table"
         stage = 0
         for s, target in ((1, (self.empty, second)), (2, (self.empty, first)),

@@ -128,7 +128,7 @@ class SwapT(Task):
         if self._stage >= 3 and right_done and left_done:
             stage = 4
         reason = ""
-        if min(b.pos(d)[2] for b in self.blocks) < TABLE_TOP - 0.05:
+        if self.fell_off(self.blocks):
             reason = "a T block fell off the table"
         elif any(not b.upright(d, 0.5) and b.speed(d) < 0.02
                  and not self.touched_by_fingers(b.body_id) for b in self.blocks):

@@ -25,7 +25,7 @@ class ACTConfig(VisuomotorConfig):
     ensemble_window: int = 0
     """Only the chunks predicted in the last this many steps are averaged (0: every chunk that
     covers the step, ``horizon`` steps back). The ensemble acts on that much of the past, so
-    it is a memory of that many steps; battery_try's state-table reading measures it."""
+    it is a memory of that many steps."""
     dim: int = 128
     """Transformer width (the paper's 512, CPU-sized); the CNN's feature maps project to it."""
     heads: int = 4
