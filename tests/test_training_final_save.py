@@ -234,3 +234,25 @@ def test_a_state_saved_before_the_description_named_the_resolution_resumes():
     assert run_differences(run_identity(before, cfg), run_identity(now, cfg)) == ""
     other = {"policy": "dp", "dataset": {"path": "/a", "episodes": 3, "resolution": "320x240"}}
     assert run_differences(run_identity(other, cfg), run_identity(now, cfg)) != ""
+
+
+def test_a_run_saved_before_a_config_field_existed_is_compared_as_its_checkpoint_reads_it():
+    """A Mem-0 run saved before ``end_classifier`` existed trained the "context" classifier,
+    as ``Mem0Config.from_dict`` reads its checkpoint: its resume is that run, not today's
+    default's."""
+    from rmbench.policies.mem0.config import Mem0Config
+    from rmbench.training.state import run_differences, run_identity
+
+    cfg, defaults = TrainConfig(steps=4), Mem0Config.saved_defaults()
+    saved = Mem0Config().to_dict()
+    del saved["end_classifier"], saved["planner_key_delay"]
+    before = run_identity({"policy": "mem0", "config": saved}, cfg)
+
+    def asked(**fields):
+        return run_identity({"policy": "mem0", "config": {**Mem0Config().to_dict(), **fields}},
+                            cfg)
+
+    assert run_differences(before, asked(end_classifier="context", planner_key_delay=0),
+                           defaults) == ""
+    assert "end_classifier" in run_differences(before, asked(planner_key_delay=0), defaults)
+    assert Mem0Config.from_dict(saved).end_classifier == "context"

@@ -44,6 +44,8 @@ def _as_type(value: Any, kind: type) -> Any:
 class PolicyConfig:
     # fields an evaluation may change without retraining: POLICY:CKPT?execute=4
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ()
+    # what a field means where a config was saved before it existed, if not its default
+    ABSENT_MEANS: ClassVar[dict[str, Any]] = {}
 
     def __post_init__(self):
         for f in fields(self):
@@ -69,7 +71,13 @@ class PolicyConfig:
         unknown = set(raw) - {f.name for f in fields(cls)}
         if unknown:
             raise ValueError(f"unknown {cls.__name__} fields {sorted(unknown)}")
-        return cls(**raw)
+        return cls(**{**cls.ABSENT_MEANS, **raw})
+
+    @classmethod
+    def saved_defaults(cls) -> dict[str, Any]:
+        """Each field's value where a saved config lacks it, as ``from_dict`` reads it: what
+        a resume compares a run saved before the field existed with."""
+        return {**cls().to_dict(), **cls.ABSENT_MEANS}
 
 
 def parse_overrides(config_cls: type[PolicyConfig], items: list[str]) -> dict[str, Any]:

@@ -70,7 +70,7 @@ from rmbench.policies.observation import (
 )
 from rmbench.tasks import get_task
 from rmbench.training.batches import batch_stream
-from rmbench.training.loop import TrainConfig, train
+from rmbench.training.loop import TrainConfig, rank_seed, train
 
 
 @dataclass(frozen=True)
@@ -242,16 +242,17 @@ def train_visuomotor(policy: str, cfg: VisuomotorConfig, model_cls: type[nn.Modu
             frames, cfg.layout_copies, cfg.layout_shift, COPIES_SEED)
     if cfg.reads_state:
         set_state_stats((model.encoders,), ds.stats, frames.low_dim)
-    trainer = trainer_cls(model, train_cfg.seed, tuple(ds.state_names or ()))
+    trainer = trainer_cls(model, rank_seed(train_cfg.seed), tuple(ds.state_names or ()))
     frames = with_features(frames, ds, cfg)
 
     def batches(start: int, rank: int, world: int):
-        sampler = RandomFrameSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
+        sampler = RandomFrameSampler(frames, train_cfg.batch_size,
+                                     seed=rank_seed(train_cfg.seed, rank))
         return batch_stream(frames, sampler, start, workers)
 
     return train(trainer, batches, train_cfg, out, describe, progress,
                  write_checkpoint=save_checkpoint, checkpoint_step=saved_step,
-                 config_defaults=type(cfg)().to_dict(), data=ds.fingerprint)
+                 config_defaults=type(cfg).saved_defaults(), data=ds.fingerprint)
 
 
 class _Slot:

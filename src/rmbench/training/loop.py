@@ -14,7 +14,11 @@ and training sits below them) and the loss curve (``rmbench.training.curve``) ar
 it. Each save writes the checkpoint before the state, so a kill at any instant of a save leaves
 a state that re-runs the save; a re-run that finds the training done but its checkpoint missing
 or torn (``checkpoint_step`` disagrees with the state) writes it again from the state. Under
-torchrun each rank trains on its own episode stream and rank 0 writes.
+torchrun each rank trains on its own episode stream and rank 0 writes; what is each rank's own
+(its RNG, the trainer's extra state: Mem-0's memories of the episodes it walks) is gathered at
+each save and each rank resumes from its own. The wrapper keeps each rank's buffers its own
+(a DDP default would copy rank 0's memories over the others' at every step) and allows
+parameters a run leaves unused (an M(1) task's end classifier, an ablation's fusion).
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ from rmbench.training.state import (
     STATE,
     Kept,
     TrainingError,
+    rank_state,
     resume,
     run_identity,
     state_bytes,
@@ -94,6 +99,12 @@ class Dist:
                    int(os.environ.get("LOCAL_RANK", 0)))
 
 
+def rank_seed(seed: int, rank: int | None = None) -> int:
+    """A rank's own seed from a run's ``seed`` (its batches, its trainer's noise), so that no two
+    ranks draw alike; rank 0's (a one-process run's) is the run's seed."""
+    return seed + 1000 * (Dist.from_env().rank if rank is None else rank)
+
+
 # (first step, rank, world) -> batches for that step onwards
 BatchSource = Callable[[int, int, int], Iterator[dict[str, torch.Tensor]]]
 # (folder, model to export, describe, step) -> None: writes the inference checkpoint
@@ -126,6 +137,8 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     device = torch.device(f"cuda:{dist.local_rank}" if cfg.device == "cuda" else cfg.device)
     if device.type == "cuda" and not torch.cuda.is_available():
         raise TrainingError("--device cuda, but this torch has no CUDA device")
+    if device.type == "cuda":
+        torch.cuda.set_device(device)  # (the device NCCL's object collectives use)
     flush_denormals()
     torch.manual_seed(cfg.seed + dist.rank)
     model.to(device)
@@ -135,7 +148,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
                             betas=(0.9, 0.999), weight_decay=cfg.weight_decay, foreach=True)
     identity = run_identity(describe, cfg, dist.world)
     defaults = json.loads(json.dumps(config_defaults or {}))
-    kept = resume(out, model, opt, identity, defaults, device, data)
+    kept = resume(out, model, opt, identity, defaults, device, data, dist.rank)
     start = kept.step
     if dist.rank == 0:
         for folder in (out, out / STATE.parent):  # what writers killed before a rename left
@@ -157,7 +170,8 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     machines = kept.machines + (() if here in kept.machines else (here,))
     # the clip's norm covers what is optimised: a frozen part (Mem-0's planner) is not in it
     trained = [p for g in opt.param_groups for p in g["params"]]
-    trainer = (torch.nn.parallel.DistributedDataParallel(model) if dist.world > 1 else model)
+    trainer = (torch.nn.parallel.DistributedDataParallel(
+        model, broadcast_buffers=False, find_unused_parameters=True) if dist.world > 1 else model)
     lead = dist.rank == 0
     rows: list[dict[str, Any]] = []
     stream = batches(start, dist.rank, dist.world)
@@ -190,8 +204,9 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
         if (step + 1) % cfg.save_every == 0 or step + 1 == cfg.steps:
             # unrounded: a short piece's steps would otherwise count as no time at all
             kept = Kept(step + 1, before + time.perf_counter() - t0, kept.wall_from, machines)
+            ranks = _gathered(rank_state(model), dist.world)  # (every rank takes part)
             if lead:
-                _save(out, model, opt, identity, kept, rows, write_checkpoint, data)
+                _save(out, model, opt, identity, kept, rows, write_checkpoint, data, ranks)
                 rows = []
             last_save = step + 1
     bar.close()
@@ -201,9 +216,19 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
             "wall_s": round(time.perf_counter() - t0, 1), **kept.timing()}
 
 
+def _gathered(mine: dict, world: int) -> list[dict] | None:
+    """Every rank's own state, in rank order, on every rank (None for one process)."""
+    if world == 1:
+        return None
+    states: list[Any] = [None] * world
+    torch.distributed.all_gather_object(states, mine)
+    return states
+
+
 def _save(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict, kept: Kept,
-          rows: list[dict], write_checkpoint: CheckpointWriter, data: str | None = None) -> None:
-    state = state_bytes(model, opt, identity, kept, data)
+          rows: list[dict], write_checkpoint: CheckpointWriter, data: str | None = None,
+          ranks: list[dict] | None = None) -> None:
+    state = state_bytes(model, opt, identity, kept, data, ranks)
     append_curve(out, rows, kept.step)
     # the checkpoint before the state that says it is written: a kill in between re-runs this
     # save, never leaves a finished training with an older or torn checkpoint

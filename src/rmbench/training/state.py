@@ -92,24 +92,46 @@ def _placeless(identity: dict) -> dict:
     return out
 
 
+def rank_state(model: nn.Module) -> dict:
+    """What is this process's own in a run: its RNG and the trainer's extra state (Mem-0's
+    memories of the episodes this rank walks, its noise generator), on the CPU."""
+    own = {"rng": torch.get_rng_state(),
+           "extra": _on_cpu(model.extra_state() if hasattr(model, "extra_state") else {})}
+    if torch.cuda.is_available():
+        own["cuda_rng"] = torch.cuda.get_rng_state_all()
+    return own
+
+
+def _on_cpu(value):
+    if torch.is_tensor(value):
+        return value.cpu()
+    if isinstance(value, dict):
+        return {k: _on_cpu(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(_on_cpu(v) for v in value)
+    return value
+
+
 def state_bytes(model: nn.Module, opt: torch.optim.Optimizer, identity: dict, kept: Kept,
-                data: str | None = None) -> bytes:
-    """The training state of ``kept.step`` as ``STATE`` stores it."""
+                data: str | None = None, ranks: list[dict] | None = None) -> bytes:
+    """The training state of ``kept.step`` as ``STATE`` stores it: rank 0's own state at the
+    top level (a one-process run's), and under torchrun every rank's in ``ranks``."""
     state = {"step": kept.step, "identity": json.dumps(identity, sort_keys=True),
              "wall_s": kept.wall_s, "wall_from": kept.wall_from,
              "machines": json.dumps(kept.machines),
              "model": model.state_dict(), "optimizer": opt.state_dict(),
-             "rng": torch.get_rng_state(), "threads": torch.get_num_threads(), "data": data,
-             "extra": model.extra_state() if hasattr(model, "extra_state") else {}}
-    if torch.cuda.is_available():
-        state["cuda_rng"] = torch.cuda.get_rng_state_all()
+             "threads": torch.get_num_threads(), "data": data,
+             **(ranks[0] if ranks else rank_state(model))}
+    if ranks:
+        state["ranks"] = ranks
     buf = io.BytesIO()
     torch.save(state, buf)
     return buf.getvalue()
 
 
 def resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: dict,
-            config_defaults: dict, device: torch.device, data: str | None = None) -> Kept:
+            config_defaults: dict, device: torch.device, data: str | None = None,
+            rank: int = 0) -> Kept:
     path = out / STATE
     if not path.exists():
         if (out / STARTED).exists():  # this folder's run stopped before its first save ended
@@ -128,7 +150,7 @@ def resume(out: Path, model: nn.Module, opt: torch.optim.Optimizer, identity: di
         return Kept()
     state = read_state(out, device)
     try:
-        return _resumed(out, state, model, opt, identity, config_defaults, data)
+        return _resumed(out, state, model, opt, identity, config_defaults, data, rank)
     except TrainingError:
         raise
     except (KeyError, TypeError, ValueError) as err:  # (a JSON error is a ValueError)
@@ -143,7 +165,7 @@ def _not_resumable(out: Path, err: Exception) -> TrainingError:
 
 
 def _resumed(out: Path, state: dict, model, opt, identity: dict, config_defaults,
-             data) -> Kept:
+             data, rank: int = 0) -> Kept:
     what = run_differences(json.loads(state["identity"]), identity, config_defaults)
     if what:
         raise TrainingError(f"{out} holds a training run with other arguments ({what}); "
@@ -157,11 +179,17 @@ def _resumed(out: Path, state: dict, model, opt, identity: dict, config_defaults
         opt.load_state_dict(state["optimizer"])
     except RuntimeError as err:  # (another model's tensors; a device's own errors pass)
         raise _not_resumable(out, err) from None
-    torch.set_rng_state(state["rng"].cpu())
-    if "cuda_rng" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
+    own = state
+    if rank and "ranks" in state:
+        own = state["ranks"][rank]
+    elif rank:
+        log.warning("%s: saved before each rank's own state was kept: rank %d resumes with "
+                    "rank 0's RNG and memories", out, rank)
+    torch.set_rng_state(own["rng"].cpu())
+    if "cuda_rng" in own and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all([s.cpu() for s in own["cuda_rng"]])
     if hasattr(model, "load_extra_state"):
-        model.load_extra_state(state["extra"])
+        model.load_extra_state(own["extra"])
     log.info("%s: resuming at step %d", out, state["step"])
     if state.get("threads", torch.get_num_threads()) != torch.get_num_threads():
         log.warning("%s: resumed on %d torch threads where it saved on %d: sums in another order "

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from rmbench.policies.action_space import action_dim
 from rmbench.policies.config import PolicyConfig
@@ -29,6 +29,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     INFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("execute", "flow_steps", "sample_noise",
                                                    "temporal_ensemble", "ensemble_every",
                                                    "event_phases", "codec_frames")
+    # checkpoints written before these fields existed trained the "context" classifier and
+    # their planner on the end frames themselves
+    ABSENT_MEANS: ClassVar[dict[str, Any]] = {"end_classifier": "context", "planner_key_delay": 0}
 
     # --- observation
     observation: str = "auto"
@@ -191,7 +194,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     None with a frozen ``backbone`` (its features are cached once per frame)."""
     # --- ablations
     ablations: tuple[str, ...] = ()
-    """Any of no_anchor, no_sliding, no_memory, no_key (trained) and gt_classifier (inference)."""
+    """Any of no_anchor, no_sliding, no_memory, no_key (trained) and gt_classifier (inference).
+    no_memory turns off the executor's two memories; on an M(n) task the planner's key memory
+    and the event end classifier's window (its last ``event_window`` frames) stay."""
 
     def __post_init__(self):
         super().__post_init__()
@@ -249,12 +254,6 @@ class Mem0Config(ReadsObservation, PolicyConfig):
         Longer than L, so one missed frame still leaves L in a row; shorter than 2 L, so the
         debounce, reset when it fires, cannot declare the same end twice."""
         return self.end_window + self.end_window // 2
-
-    @classmethod
-    def from_dict(cls, raw):
-        # checkpoints written before these fields existed trained the "context" classifier
-        # and their planner on the end frames themselves
-        return super().from_dict({"end_classifier": "context", "planner_key_delay": 0, **raw})
 
     @property
     def action_dim(self) -> int:

@@ -42,7 +42,7 @@ from rmbench.policies.nn.vision import color_jitter
 from rmbench.policies.observation import choose, set_state_stats
 from rmbench.tasks import get_task
 from rmbench.training.batches import batch_stream
-from rmbench.training.loop import TrainConfig, lr_at, train
+from rmbench.training.loop import TrainConfig, lr_at, rank_seed, train
 from rmbench.training.state import (
     STATE,
     TrainingError,
@@ -169,19 +169,20 @@ def train_mem0(dataset: str | Path, out: str | Path, cfg: Mem0Config, train_cfg:
     if executor_from is not None:
         return _beside_executor(Path(executor_from), step, model, out, describe, planner_report,
                                 time.perf_counter() - t0)
-    trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, train_cfg.seed,
+    trainer = Mem0Trainer(model, train_cfg.batch_size, decompose, rank_seed(train_cfg.seed),
                           describe.get("state_names", ()))
     # kept in the training state, so a run interrupted after the planner's fit still reports it
     trainer.planner_report = planner_report
     frames = with_features(examples, ds, cfg)
 
     def batches(start: int, rank: int, world: int):
-        sampler = EpisodeOrderSampler(frames, train_cfg.batch_size, seed=train_cfg.seed + 1000 * rank)
+        sampler = EpisodeOrderSampler(frames, train_cfg.batch_size,
+                                      seed=rank_seed(train_cfg.seed, rank))
         return batch_stream(frames, sampler, start, workers)
 
     result = train(trainer, batches, train_cfg, out, describe, progress,
                    write_checkpoint=save_checkpoint, checkpoint_step=saved_step,
-                   config_defaults=type(cfg)().to_dict(), data=ds.fingerprint)
+                   config_defaults=type(cfg).saved_defaults(), data=ds.fingerprint)
     if trainer.planner_report is not None:
         write_json(out / "training" / "planner.json", trainer.planner_report, indent=2)
     return result
@@ -198,7 +199,7 @@ def _executor_source(source: Path, out: Path, describe: dict[str, Any], cfg: Mem
     saved, step = saved_run(source)
     executor_describe = {**describe, "config": cfg.executor_config().to_dict()}
     what = run_differences(saved, run_identity(executor_describe, train_cfg, saved.get("world", 1)),
-                           type(cfg)().to_dict())
+                           type(cfg).saved_defaults())
     if what:
         raise TrainingError(f"{source} is not the executor run of this one ({what})")
     if step != train_cfg.steps:
