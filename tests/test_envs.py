@@ -104,13 +104,26 @@ def test_truncation_at_step_limit():
         env.step(obs["agent_pos"])
 
 
-def test_physics_blow_up_ends_episode_with_sim_error():
+def test_physics_blow_up_cuts_the_episode_off_with_sim_error():
     env = rmbench.make("put_back_block", render=False)
     obs, _ = env.reset(seed=0)
     env.unwrapped.sim.data.qvel[:] = np.nan
-    _, reward, terminated, _, info = env.step(obs["agent_pos"])
-    assert terminated and not info["is_success"]
+    _, reward, terminated, truncated, info = env.step(obs["agent_pos"])
+    assert truncated and not terminated and not info["is_success"]
     assert "diverged" in info["sim_error"] or "non-finite" in info["sim_error"]
+
+
+@pytest.mark.parametrize("spin, blow_up", [(400.0, False), (3000.0, True)])
+def test_a_struck_piece_may_spin_fast_without_a_sim_error(spin, blow_up):
+    """A cube knocked by an arm spins past the joints' 200 rad/s limit in sound physics;
+    only a spin no strike gives is a blow-up."""
+    env = rmbench.make("put_back_block", render=False)
+    obs, _ = env.reset(seed=0)
+    sim = env.unwrapped.sim
+    free = sim.model.joint("cube/free")
+    sim.data.qvel[free.dofadr[0] + 5] = spin  # about the vertical axis: it stays on the table
+    _, _, _, truncated, info = env.step(obs["agent_pos"])
+    assert ("sim_error" in info) == blow_up and truncated == blow_up
 
 
 def test_unknown_task_lists_known_ones():

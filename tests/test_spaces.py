@@ -126,8 +126,8 @@ def test_the_observation_after_a_physics_blow_up_lies_in_the_space():
                        **SMALL)
     obs, _ = env.reset(seed=0)
     env.sim.data.qvel[:] = np.nan
-    obs, _, terminated, _, info = env.step(obs["agent_pos"])
-    assert terminated and "sim_error" in info
+    obs, _, _, truncated, info = env.step(obs["agent_pos"])
+    assert truncated and "sim_error" in info
     assert not outside(env.observation_space, obs)
 
 

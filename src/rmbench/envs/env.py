@@ -163,7 +163,8 @@ class RMBenchEnv(gym.Env):
                         failure_reason=f"sim error: {err}", progress=self._last.progress,
                         predicates=self._last.predicates, step=self._steps,
                         **self._subtask_info(self._last, ended=False))
-            return self._observation(safe=True), 0.0, True, False, info
+            # truncated, not terminated: the episode is cut off, not ended by the task
+            return self._observation(safe=True), 0.0, False, True, info
         ev = self.task.evaluate()
         reward = ev.progress - self._last.progress
         self._last = ev

@@ -12,7 +12,7 @@ import numpy as np
 from rmbench.sim import robot
 from rmbench.sim.geometry import mat_to_quat
 from rmbench.sim.gl import require_rendering
-from rmbench.sim.station import MAX_QVEL, SimulationError, StationConfig, home_action
+from rmbench.sim.station import MAX_QVEL, MAX_SPIN, SimulationError, StationConfig, home_action
 
 ACTION_DIM = 14  # an action, and the joint state: per arm 6 joints then the gripper
 ARM_ENTRIES = np.r_[0:6, 7:13]  # action entries of the 12 arm joints (not the grippers)
@@ -60,6 +60,11 @@ class Simulator:
         self.data = mujoco.MjData(model)
         self.config = config
         m = model
+        # each dof's runaway limit: the spin of a free piece (a free joint's last 3 dofs) may
+        # far exceed what a joint or a translation reaches in sound physics
+        self.qvel_limit = np.full(m.nv, MAX_QVEL)
+        for j in np.flatnonzero(m.jnt_type == mujoco.mjtJoint.mjJNT_FREE):
+            self.qvel_limit[m.jnt_dofadr[j] + 3: m.jnt_dofadr[j] + 6] = MAX_SPIN
         # Per side: 6 arm joint qpos/qvel addresses, then the two finger joints.
         self.arm_qpos = {}
         self.arm_dof = {}
@@ -172,9 +177,11 @@ class Simulator:
         d = self.data
         if not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
             raise SimulationError(f"non-finite state at t={d.time:.3f}s")
-        vmax = float(np.abs(d.qvel).max(initial=0.0))
-        if vmax > MAX_QVEL:
-            raise SimulationError(f"runaway velocity {vmax:.1f} at t={d.time:.3f}s")
+        over = np.abs(d.qvel) > self.qvel_limit
+        if over.any():
+            dof = int(np.flatnonzero(over)[0])
+            raise SimulationError(f"runaway velocity {d.qvel[dof]:.1f} (dof {dof}) at "
+                                  f"t={d.time:.3f}s")
         # MuJoCo resets the state itself when it meets a bad value, so its warnings are the
         # only trace of a blow-up inside the control period.
         for warning in ("BADQPOS", "BADQVEL", "BADQACC"):

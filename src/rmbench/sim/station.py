@@ -6,8 +6,9 @@ y = -0.30. Both arm bases face +y from behind the near edge.
 
 Control: an action is 14 absolute targets (6 joints + gripper in [0, 1], left then right),
 applied at ``control_hz`` (20 Hz). Each control period runs ``substeps`` physics steps of
-``timestep`` seconds (25 x 2 ms) while the actuator setpoints move linearly from the previous
-target to the new one, so the position servos see a smooth reference instead of a step.
+``timestep`` seconds (25 x 2 ms) while a reference moves linearly from the previous target to
+the new one and the actuator setpoints follow it with a 50 ms first-order lag (``servo_tau``),
+so the position servos see a smooth reference instead of a step.
 """
 
 from __future__ import annotations
@@ -31,8 +32,11 @@ HOME_ARM = {"left": (0.9, -1.2, 1.5, 0.0, 0.3, 0.0), "right": (-0.9, -1.2, 1.5, 
 HOME_GRIPPER = 1.0
 DEFAULT_CAMERAS = ("head", "left_wrist", "right_wrist")
 ALL_CAMERAS = ("head", "left_wrist", "right_wrist", "third_person")
-# Runaway-velocity threshold (rad/s or m/s): far beyond anything the servos command.
+# Runaway-velocity thresholds: far beyond anything the servos command (rad/s, m/s), and for a
+# free piece's spin (rad/s) far beyond what a struck piece reaches (a 4 cm cube knocked at
+# 4.7 m/s spins at about 200 rad/s; a 2 cm piece's edge at 2,000 rad/s would move at 20 m/s).
 MAX_QVEL = 200.0
+MAX_SPIN = 2000.0
 
 
 class SimulationError(RuntimeError):
