@@ -1,3 +1,5 @@
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -230,4 +232,27 @@ def test_an_episode_s_hidden_facts_fix_another_s_as_reported(task):
     assert fixed and any(isinstance(v, list) for v in fixed.values())
     _, again = env.reset(seed=11, options={"hidden": fixed})
     assert {k: again["hidden"][k] for k in fixed} == fixed
+    env.close()
+
+
+@pytest.mark.parametrize("task", sorted(rmbench.TASKS))
+def test_an_episode_s_hidden_facts_given_back_whole_fix_that_episode(task):
+    """``info["hidden"]`` as reported (through JSON) given back whole: the settable facts are
+    fixed and the rest checked, so the same seed gives the same episode; a reported fact that
+    is not the episode's is refused in one line."""
+    env = rmbench.make(task, render=False)
+    obs, info = env.reset(seed=3)
+    hidden = json.loads(json.dumps(info["hidden"]))
+    again, info_again = env.reset(seed=3, options={"hidden": hidden})
+    assert info_again["hidden"] == info["hidden"]
+    assert all(np.array_equal(obs[k], again[k]) for k in obs)
+    reported = sorted(set(hidden) - set(rmbench.TASKS[task].hidden_keys))
+    if reported:
+        _, other = env.reset(seed=4)
+        wrong = next((k for k in reported if other["hidden"][k] != info["hidden"][k]), None)
+        if wrong is not None:
+            with pytest.raises(ValueError, match=f"hidden {wrong}=.* is not this episode's"):
+                env.reset(seed=4, options={"hidden": {wrong: hidden[wrong]}})
+    with pytest.raises(ValueError, match="cannot fix hidden variable 'no_such'"):
+        env.reset(seed=3, options={"hidden": {"no_such": 1}})
     env.close()

@@ -11,6 +11,7 @@ the ground-truth subtask all derive from those predicates in :mod:`rmbench.envs.
 
 from __future__ import annotations
 
+import json
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -98,6 +99,7 @@ class Task:
         self._best_progress = 0.0
         self._home_gaps: deque[np.ndarray] = deque(maxlen=HOME_WINDOW)
         self.overrides: dict[str, Any] = {}
+        self._reported: dict[str, Any] = {}  # hidden facts given that follow from the rest
 
     # -- the episode protocol -----------------------------------------------------------
     def start_episode(self, rng: np.random.Generator,
@@ -110,6 +112,7 @@ class Task:
         self._best_progress = 0.0
         self._home_gaps.clear()  # the arms' window starts with the episode
         self.initialize(rng)
+        self._check_reported()
 
     # -- hooks ------------------------------------------------------------------------
     @property
@@ -163,16 +166,31 @@ class Task:
 
     # -- shared helpers -----------------------------------------------------------------
     def set_overrides(self, hidden: dict[str, Any] | None) -> None:
-        """Fix hidden variables for the next episode (see ``hidden_keys``)."""
+        """Fix hidden variables for the next episode (``hidden_keys``). The other facts
+        ``hidden_state`` reports (which follow from the seed and the fixed ones) may come too,
+        so that an episode's ``info["hidden"]`` given back whole fixes that episode: each is
+        checked against the episode once it is placed (``_check_reported``)."""
         if hidden is not None and not isinstance(hidden, dict):
             raise ValueError(f"hidden must be a map of {list(self.hidden_keys)} to values, got "
                              f"{type(hidden).__name__}")
         hidden = dict(hidden or {})
-        unknown = sorted(set(hidden) - set(self.hidden_keys))
-        if unknown:
-            raise ValueError(f"{self.name} cannot fix hidden variable(s) {unknown}; "
-                             f"it has {list(self.hidden_keys)}")
-        self.overrides = hidden
+        self.overrides = {k: v for k, v in hidden.items() if k in self.hidden_keys}
+        self._reported = {k: v for k, v in hidden.items() if k not in self.hidden_keys}
+
+    def _check_reported(self) -> None:
+        """Each reported fact given with the hidden variables is this episode's (as JSON says
+        it), else a ValueError: it cannot be fixed, only follow."""
+        if not self._reported:
+            return
+        actual = _as_json(self.hidden_state())
+        for key, value in self._reported.items():
+            if key not in actual:
+                raise ValueError(f"{self.name} cannot fix hidden variable {key!r}; it fixes "
+                                 f"{list(self.hidden_keys)} and reports {sorted(actual)}")
+            if _tuples(_as_json(value)) != _tuples(actual[key]):
+                raise ValueError(f"{self.name}: hidden {key}={value!r} is not this episode's "
+                                 f"({actual[key]!r}): it follows from the seed and "
+                                 f"{list(self.hidden_keys)}, it cannot be fixed")
 
     def choose(self, key: str, drawn, allowed=None):
         """``drawn`` (already taken from the episode's generator, so later draws do not
@@ -240,6 +258,12 @@ class Task:
                     g2 in fingers and m.geom_bodyid[g1] == body_id):
                 return True
         return False
+
+
+def _as_json(value):
+    """``value`` as JSON gives it back (numpy values as plain numbers and lists)."""
+    return json.loads(json.dumps(value, default=lambda o: o.tolist() if hasattr(o, "tolist")
+                                 else str(o)))
 
 
 def _tuples(value):
