@@ -220,6 +220,10 @@ def test_a_reset_that_fails_leaves_no_episode_to_step():
             env.reset(seed=1, options=bad)
     with pytest.raises(ValueError, match="cameras=\\('head',\\)"):
         rmbench.make("put_back_block", cameras="head")
+    with pytest.raises(ValueError, match="render=False"):
+        rmbench.make("put_back_block", cameras=())
+    assert "pixels" not in rmbench.make("put_back_block", cameras=(), render=False).reset(
+        seed=0)[0]
 
 
 @pytest.mark.parametrize("task", ["battery_try", "cover_blocks", "blocks_ranking_try"])
