@@ -99,9 +99,12 @@ def _running(pid: int) -> bool:
 
 
 def write_atomic(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically."""
+    """Write ``data`` to ``path`` atomically: against a kill the rename suffices; the data
+    reach the disk before it, so that a power loss cannot leave a renamed empty file."""
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
 
 
 def write_json(path: str | Path, obj: Any, indent: int | None = 1) -> None:
