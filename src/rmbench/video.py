@@ -133,8 +133,9 @@ class VideoWriter:
 
 
 class FrameCodec:
-    """Frames through a codec one at a time, each decoded back as it goes in: a frame as a
-    dataset stores it (RGB to 4:2:0, the codec's loss) for a policy trained on stored frames,
+    """Frames through a codec one at a time, each decoded back as it goes in: a frame near the
+    one a dataset stores (RGB to 4:2:0, the codec's loss; not equal, as the stored stream's
+    B-frames and lookahead code each frame otherwise) for a policy trained on stored frames,
     in closed loop. One stream per camera and episode, as a recorded episode's video. x264
     runs without lookahead or B-frames (``tune=zerolatency``), so frame t comes back at step
     t; the codec's other settings (CRF, preset, GOP) are kept."""

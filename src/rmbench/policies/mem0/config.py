@@ -131,8 +131,9 @@ class Mem0Config(ReadsObservation, PolicyConfig):
     """With end_classifier "event": z_img entries in the event window (4 at stride 5: 1 s)."""
     codec_frames: bool = False
     """Camera policies, in the closed loop: each camera's frames pass through the dataset codec
-    (``video.FrameCodec``, one stream per episode) before they are read, as the frames the
-    policy trained on were stored; off, it reads them as rendered."""
+    (``video.FrameCodec``, one stream per episode) before they are read, near the frames the
+    policy trained on as stored (not equal: the stream runs without the stored one's B-frames
+    and lookahead); off, it reads them as rendered."""
     event_phases: bool = False
     """With end_classifier "event", in the closed loop: one event window per phase of the
     memory stride, each step's frame entering its phase's, and the classifier reading the
