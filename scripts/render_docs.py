@@ -563,10 +563,12 @@ def state_seeds() -> str:
     rows = []
     for task, spec, cell in pooled:
         pcts = [100 * r["successes"] / r["episodes"] for r in cell["seeds"].values()]
-        rows.append([task, COLUMN[spec], *(rate(cell["seeds"].get(k)) for k in names),
-                     rate(cell), f"{max(pcts) - min(pcts):.0f}"])
-    return markdown(["task", "column", *(f"seed {k}" for k in names), "pooled",
-                     "spread (points)"], rows)
+        rows.append([task + _older(task, spec, cell), COLUMN[spec],
+                     *(rate(cell["seeds"].get(k)) for k in names), rate(cell),
+                     f"{max(pcts) - min(pcts):.0f}"])
+    table = markdown(["task", "column", *(f"seed {k}" for k in names), "pooled",
+                      "spread (points)"], rows)
+    return table + _footnote(table)
 
 
 def state_failures() -> str:
@@ -588,11 +590,15 @@ def reference_reproductions() -> str:
                 continue
             cam = pixels.get(task.name, {}).get("mem0")
             rows.append([task.name, f"{PUBLISHED['Mem-0'][task.name]:g}",
-                         f"{report['rates'][task.name]:g}", rate(state[task.name]["mem0"]),
-                         rate(cam) if cam else "—", f"[{report['date']}]({report['source']})"])
-    return markdown(["task", "Mem-0 (published, cameras)", "reproduced with the reference code "
+                         f"{report['rates'][task.name]:g}",
+                         rate(state[task.name]["mem0"])
+                         + _older(task.name, "mem0", state[task.name]["mem0"]),
+                         rate(cam) + _older(task.name, "mem0", cam) if cam else "—",
+                         f"[{report['date']}]({report['source']})"])
+    table = markdown(["task", "Mem-0 (published, cameras)", "reproduced with the reference code "
                      "(cameras)", "rmbench Mem-0 (state)", "rmbench Mem-0 (cameras)", "report"],
-                    rows)
+                     rows)
+    return table + _footnote(table)
 
 
 def pixels_failures() -> str:
@@ -632,7 +638,8 @@ def _failures(res: dict, below_published: bool) -> str:
             if r.get("failure_reasons"):
                 ends = _ending_kinds(r["failure_reasons"])
                 rows.append([label, mem0, seed, "(not kept)", sum(ends.values()), _endings(ends)])
-    table = markdown(["task", "Mem-0 (published)", "seed", "stage the episode ended in",
+    table = markdown(["task", "Mem-0 (published in parentheses)", "seed",
+                      "stage the episode ended in",
                       "failed episodes", "how they ended"], rows)
     note = (f"\n(not kept): {_and(unkept)} evaluated before the records kept the stage a failed "
             "episode ended in; how they ended is from the evaluation's failure messages where "
@@ -737,8 +744,10 @@ def _wall(cell: dict, stage: str, machines: dict[str, dict]) -> str:
     return (minutes(total) + (f" from step {start:,}" if start else "") + ": " + "; ".join(parts))
 
 
-def _record_rows(cells: dict[str, dict[str, dict]], machines: dict[str, dict] | None = None
-                 ) -> list[list[str]]:
+def _record_rows(cells: dict[str, dict[str, dict]], machines: dict[str, dict] | None = None,
+                 marks: bool = True) -> list[list[str]]:
+    """Each cell's record; ``marks``: a cell on an older task or data marked as the tables
+    mark it (a superseded group says instead why its cells no longer stand)."""
     machines = load("table_state.json")["machines"] if machines is None else machines
     rows = []
     for task in ordered():
@@ -759,8 +768,9 @@ def _record_rows(cells: dict[str, dict[str, dict]], machines: dict[str, dict] | 
             failures = rec.get("failures") or "; ".join(
                 f"{why} {n}" for why, n in list(c["failure_reasons"].items())[:4])
             evals = " + ".join(_seed_wall(r, "eval", s, named, machines) for s, r in seeds.items())
-            rows.append([task.name, f"`{spec}`", success, progress, endings,
-                         failures, train, evals])
+            rows.append([task.name + (_older(task.name, spec, c) if marks else ""), f"`{spec}`",
+                         success, progress,
+                         endings, failures, train, evals])
     return rows
 
 
@@ -785,7 +795,8 @@ RECORD_HEADER = ["task", "policy", "success", "progress", "endings", "most frequ
 
 
 def state_records() -> str:
-    return markdown(RECORD_HEADER, _record_rows(load("table_state.json")["cells"]))
+    table = markdown(RECORD_HEADER, _record_rows(load("table_state.json")["cells"]))
+    return table + _footnote(table)
 
 
 def state_hardware() -> str:
@@ -814,7 +825,8 @@ def state_superseded() -> str:
     out = []
     for group in res["superseded"]:
         out.append(f"{group['why'][0].upper()}{group['why'][1:]}:\n\n"
-                   + markdown(RECORD_HEADER, _record_rows(group["cells"], res["machines"])))
+                   + markdown(RECORD_HEADER, _record_rows(group["cells"], res["machines"],
+                                                             marks=False)))
     return "\n".join(out)
 
 

@@ -47,16 +47,19 @@ def test_format_rate():
     assert format_rate(20, 100) == "20 [13, 29]"
 
 
-def test_a_difference_that_rounds_to_zero_prints_no_sign():
-    """'-9 [-18, 0]', never '[-18, -0]': a zero is on neither side."""
+def test_an_interval_end_that_is_not_zero_never_prints_as_zero():
+    """'-9 [-18, -0.2]', never '[-18, 0]' beside an interval that excludes zero nor
+    '[-18, -0]'; a difference that is zero prints without a sign."""
     from rmbench.eval.intervals import format_difference, signed
 
-    assert format_difference(-0.09, -0.18, -0.004) == "-9 [-18, 0]"
+    assert format_difference(-0.09, -0.18, -0.004) == "-9 [-18, -0.4]"
+    assert format_difference(-0.09, -0.18, -0.00004) == "-9 [-18, -0.004]"
     assert format_difference(0.0, -0.02, 0.02) == "0 [-2, +2]"
+    assert format_difference(0.0, 0.0, 0.02) == "0 [0, +2]"
     assert format_difference(0.66, 0.54, 0.75) == "+66 [+54, +75]"
     assert signed(-0.04, 1) == "0.0" and signed(-0.05001, 1) == "-0.1" and signed(0.4) == "0"
     # press_button's Mem-0 (136/200) minus gt_classifier (154/200): an upper end of -0.24 points
-    assert format_difference(*difference(136, 200, 154, 200)) == "-9 [-18, 0]"
+    assert format_difference(*difference(136, 200, 154, 200)) == "-9 [-18, -0.2]"
 
 
 def test_a_share_stores_its_rate_and_interval_and_nothing_where_nothing_was_counted():

@@ -81,6 +81,16 @@ def signed(points: float, digits: int = 0) -> str:
 
 
 def format_difference(d: float, low: float, high: float, digits: int = 0) -> str:
-    """'+66 [+54, +75]', '-9 [-18, 0]': a difference of two rates and its 95% interval, given
-    as fractions, in points."""
-    return f"{signed(100 * d, digits)} [{signed(100 * low, digits)}, {signed(100 * high, digits)}]"
+    """'+66 [+54, +75]', '-9 [-18, -0.2]': a difference of two rates and its 95% interval,
+    given as fractions, in points. An end that is not zero keeps a decimal more until it reads
+    so: an interval that excludes zero never prints one as its end."""
+    return (f"{signed(100 * d, digits)} [{_end(100 * low, digits)}, "
+            f"{_end(100 * high, digits)}]")
+
+
+def _end(points: float, digits: int) -> str:
+    text = signed(points, digits)
+    while float(text) == 0 and round(points, 9) != 0 and digits < 3:
+        digits += 1
+        text = signed(points, digits)
+    return text
