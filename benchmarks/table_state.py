@@ -141,10 +141,13 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
             new = {"conditions": stated,
                    **cell_record(row, task),
                    "dataset": dataset, "command": run["command"]}
+            ran = [s for s in (run.get("plan") or {}).get("policies", [])
+                   if split_seed(s)[0] == spec]
+            if seed is None and "policies" in (run.get("plan") or {}) and spec not in ran:
+                raise SystemExit(f"{table}: its {spec} column is {ran}, without seed 0: "
+                                 f"record a seed with --seed")
             if seed is not None:
                 # a table's column is its seeds' pool: it must be this seed alone
-                ran = [s for s in (run.get("plan") or {}).get("policies", [])
-                       if split_seed(s)[0] == spec]
                 if run.get("plan") and ran != [with_seed(spec, seed)]:
                     raise SystemExit(f"{table}: its {spec} column is {ran}, not seed {seed} "
                                      f"alone")
@@ -249,6 +252,10 @@ def main(argv: list[str] | None = None) -> int:
     if ran and ran != args.obs:
         raise SystemExit(f"{args.table}: a table of the {ran} observation, not {args.obs} "
                          f"(--obs)")
+    split = (run.get("plan") or {}).get("split", "test")
+    if split != "test":
+        raise SystemExit(f"{args.table}: a table on the {split} episodes; the results report "
+                         f"each task's test episodes")
     if not args.out.exists() and args.obs == "state":
         raise SystemExit(f"{args.out}: no such results file")
     doc = json.loads(args.out.read_text()) if args.out.exists() else new_table(run)

@@ -264,11 +264,22 @@ def _pixels_line(cams: dict) -> str:
             f"{done} of 9 rows measured so far (— where a cell is not yet).\n")
 
 
+def _comparable(task: str, spec: str, cell: dict, other_spec: str, other: dict) -> bool:
+    """Whether two cells of a row measure the same task version, and, where both learn the
+    subtask layout (``reads_subtask_cut``), on data of the same format: only such a pair's
+    difference is shown (two cells marked alike may still stand on different versions)."""
+    if recorded_gym_id(task, cell) != recorded_gym_id(task, other):
+        return False
+    return (not (reads_subtask_cut(task, spec) and reads_subtask_cut(task, other_spec))
+            or cell.get("dataset") == other.get("dataset"))
+
+
 def _memory_gap(res: dict, task: str) -> list[str]:
-    """Mem-0 minus ``no_memory`` in points with Newcombe's 95% interval, * where it excludes 0."""
+    """Mem-0 minus ``no_memory`` in points with Newcombe's 95% interval, * where it excludes 0;
+    — where either is missing or the two are not comparable (``_comparable``)."""
     row = res["cells"].get(task, {})
     a, b = row.get("mem0"), row.get("mem0:no_memory")
-    if a is None or b is None:
+    if a is None or b is None or not _comparable(task, "mem0", a, "mem0:no_memory", b):
         return ["—"]
     ra, rb = Rate.of(a), Rate.of(b)
     d, low, high = difference(ra.successes, ra.episodes, rb.successes, rb.episodes)
@@ -514,11 +525,12 @@ def state_differences() -> str:
     cells, apart = {}, {}
     for t, row in res["cells"].items():
         base = set(_older(t, "mem0", row["mem0"]).strip())
-        cells[t] = {s: c for s, c in row.items() if set(_older(t, s, c).strip()) == base}
-        for s, c in row.items():
-            marks = "".join(sorted(set(_older(t, s, c).strip()) ^ base))
-            if marks:
-                apart.setdefault(t, {})[s] = f"— {marks}"
+        shown = {s: c for s, c in row.items() if s in specs}
+        cells[t] = {s: c for s, c in shown.items() if _comparable(t, s, c, "mem0", row["mem0"])}
+        for s, c in shown.items():
+            if s not in cells[t]:
+                marks = "".join(sorted(set(_older(t, s, c).strip()) ^ base)) or _older(t, s, c)
+                apart.setdefault(t, {})[s] = f"— {marks.strip()}"
     left_out = "".join(sorted({m for row in apart.values() for v in row.values() for m in v[2:]}))
     # a row measured on an earlier task version says so
     labels = {t: f"{t} ‡" for t, row in res["cells"].items() if "‡" in _older(t, "mem0", row["mem0"])}

@@ -25,6 +25,14 @@ def _run(k=36):
             "cells": {"press_button": {"mem0": {"successes": k}}}}
 
 
+def test_a_table_that_ran_another_seed_alone_is_not_recorded_as_the_cell(table_state):
+    """A table whose Mem-0 column is seed 1 alone holds no seed-0 cell to replace the
+    recorded one with: it is recorded with --seed 1, into the pool."""
+    run = {**_run(), "plan": {"obs": "state", "policies": ["mem0@1"]}}
+    with pytest.raises(SystemExit, match=r"its mem0 column is \['mem0@1'\], without seed 0"):
+        table_state.record(_doc(), run, ["press_button"], ["mem0"], "rmbench/2", "why", "t")
+
+
 def test_a_cell_of_other_data_moves_to_superseded(table_state):
     from rmbench.suite.records import unstated_conditions
 
@@ -119,6 +127,33 @@ def test_an_evaluation_folder_gives_one_column_with_its_checkpoints_history(tmp_
     assert row["failure_reasons"] == {"timeout": 1} and row["gym_id"] == "rmbench/PressButton-v2"
     assert row["checkpoint"] == str(refit)
     assert res["command"].startswith("rmbench eval --task press_button --policy mem0:")
+
+
+@pytest.mark.parametrize("run, said", [
+    ({"split": "validation"}, "other episodes than the table's"),
+    ({"seed": 5}, "other episodes than the table's"),
+    ({"seeds_of": "/data"}, "other episodes than the table's"),
+    ({"policy": "POLICY"}, "evaluates mem0 .*, not mem0:gt_classifier"),
+])
+def test_an_evaluation_folder_of_other_episodes_or_another_column_is_refused(tmp_path, run,
+                                                                             said):
+    """A validation run, a run from another seed or on a dataset's seeds, or a plain Mem-0
+    evaluation given as its gt_classifier column: each refused in one line."""
+    import json
+
+    from rmbench.suite.records import evaluation_rows
+
+    ckpt, evals = tmp_path / "ckpt", tmp_path / "eval"
+    ckpt.mkdir()
+    (ckpt / "config.json").write_text(json.dumps({"config": {"ablations": []}}))
+    evals.mkdir()
+    policy = f"mem0:{ckpt}?ablation=gt_classifier"
+    run = {"policy": policy, "seed": 0, "episodes": 2,
+           **{k: (f"mem0:{ckpt}" if v == "POLICY" else v) for k, v in run.items()}}
+    (evals / "run.json").write_text(json.dumps(run))
+    (evals / "summary.json").write_text(json.dumps({"tasks": {}}))
+    with pytest.raises(ValueError, match=said):
+        evaluation_rows(evals, "mem0:gt_classifier")
 
 
 def _seed_row(k, **extra):

@@ -19,6 +19,7 @@ import itertools
 import json
 from pathlib import Path
 from typing import Any
+from urllib.parse import parse_qsl
 
 from rmbench.eval.boundaries import boundary_counts
 from rmbench.eval.endings import failures_by_stage
@@ -29,6 +30,7 @@ from rmbench.machine import describe
 from rmbench.policies.config import split_policy
 from rmbench.suite.cell_rows import result_row
 from rmbench.suite.clock import TIMING
+from rmbench.suite.plan import split_seed
 from rmbench.tasks import get_task
 
 KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",
@@ -141,10 +143,18 @@ def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
     runs on (record where the evaluation ran). Paths are read as the evaluation wrote them,
     so this runs where it ran."""
     run, summary = (json.loads((folder / f).read_text()) for f in ("run.json", "summary.json"))
+    if run.get("split", "test") != "test" or run.get("seeds_of") or run.get("seed", 0) != 0:
+        raise ValueError(f"{folder}: evaluated on other episodes than the table's (split "
+                         f"{run.get('split', 'test')!r}, seed {run.get('seed', 0)}"
+                         f"{', seeds of ' + run['seeds_of'] if run.get('seeds_of') else ''}): "
+                         f"a table reports its task's 100 test episodes")
     ckpt = Path(split_policy(run["policy"])[1])
     if not (ckpt / "config.json").is_file():
         raise ValueError(f"{folder}: evaluates {run['policy']!r}, not a checkpoint found here")
     config = json.loads((ckpt / "config.json").read_text())
+    evaluated = _evaluated_spec(run["policy"], config)
+    if evaluated != split_seed(spec)[0]:
+        raise ValueError(f"{folder}: evaluates {evaluated} ({run['policy']}), not {spec}")
     refit = config.get("planner_refit")
     trained = Path(refit["from"]) if refit else ckpt
     timing = json.loads((trained / TIMING).read_text()) if (trained / TIMING).exists() else {}
@@ -161,6 +171,16 @@ def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
     return {"command": f"rmbench eval {tasks} --policy {run['policy']} --episodes "
                        f"{run['episodes']} --seed {run['seed']} --out {folder}",
             "plan": None, "cells": cells}
+
+
+def _evaluated_spec(policy: str, config: dict[str, Any]) -> str:
+    """The table column an evaluated policy is: its name with the ablations its checkpoint
+    was trained with and those its argument adds (``mem0:no_key``, ``mem0:gt_classifier``)."""
+    name, _, query_text = split_policy(policy)
+    query = dict(parse_qsl(query_text))
+    ablations = [*(config.get("config", {}).get("ablations") or ()),
+                 *(a for a in query.get("ablation", "").split(",") if a)]
+    return name + (":" + "+".join(dict.fromkeys(ablations)) if ablations else "")
 
 
 def reads_subtask_cut(task: str, column: str) -> bool:
