@@ -472,7 +472,9 @@ def _beside_published(rows: list[list[str]], specs: list[str]) -> list[list[str]
     for row in rows:
         task = row[0].strip("*")
         group = row[1] if task.startswith("average") else None
-        without = tuple(task.split(" without ")[1].split(" and ")) if " without " in task else ()
+        # (the label ``_and`` wrote: "a", "a and b", "a, b and c")
+        without = (tuple(re.split(r", | and ", task.split(" without ")[1]))
+                   if " without " in task else ())
         row = list(row)
         for k, spec in enumerate(specs):
             if spec not in names or row[2 + k] == "n/a":
