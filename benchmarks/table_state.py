@@ -246,8 +246,11 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--seed {args.seed}: a training seed is 0 or more")
     if args.evaluation and "," in args.specs:
         raise SystemExit("--evaluation records one column: give one --specs")
-    run = (json.loads((Path(args.table) / "table.json").read_text()) if args.table
-           else evaluation_rows(Path(args.evaluation), args.specs))
+    try:
+        run = (json.loads((Path(args.table) / "table.json").read_text()) if args.table
+               else evaluation_rows(Path(args.evaluation), args.specs))
+    except ValueError as err:
+        raise SystemExit(str(err)) from None
     ran = (run.get("plan") or {}).get("obs")
     if ran and ran != args.obs:
         raise SystemExit(f"{args.table}: a table of the {ran} observation, not {args.obs} "

@@ -988,9 +988,13 @@ def robustness() -> str:
     wall = sum(c["wall_s"] for c in cells.values())
     head = [f"{k} {s:g}" if s else "no noise" for k, s in ROBUSTNESS_COLUMNS]
     table = markdown(["task", *head], rows)
+    beyond = [key for key in cells if key[1:] not in ROBUSTNESS_COLUMNS]
+    levels = sorted({f"{k} {s:g}" for _, k, s in beyond})
+    extra = (f" ({len(beyond)} of them at a level the table leaves out: {_and(levels)})"
+             if beyond else "")
     return (table + f"\nEpisodes: {episodes}, in which an expert raised: {raised}; wall time of "
-            f"the {len(cells)} cells: {wall / 3600:.1f} h. In parentheses: episodes per cell.\n"
-            + _footnote(table))
+            f"the {len(cells)} cells{extra}: {wall / 3600:.1f} h. In parentheses: episodes per "
+            "cell.\n" + _footnote(table))
 
 
 def robustness_margin() -> str:
@@ -1017,8 +1021,9 @@ def robustness_failures() -> str:
             # by kind: the coordinates in a failure message make every message unique
             merged = list(_ending_kinds(c["failures"]).items())
             ends = "; ".join(f"{r} ({n})" for r, n in merged[:4])
-            lines.append(f"- {task.name}, {kind} {sigma:g}: {ends}")
-    return "\n".join(lines) + "\n"
+            lines.append(f"- {task.name}{_expert_mark(task, c)}, {kind} {sigma:g}: {ends}")
+    text = "\n".join(lines) + "\n"
+    return text + _footnote(text)
 
 
 def aliasing() -> str:

@@ -222,6 +222,9 @@ def test_a_reset_that_fails_leaves_no_episode_to_step():
         rmbench.make("put_back_block", cameras="head")
     with pytest.raises(ValueError, match="render=False"):
         rmbench.make("put_back_block", cameras=())
+    # a state observation with rendering on (for env.render's video) needs no camera
+    rmbench.make("put_back_block", obs_type="environment_state_agent_pos", render=True,
+                 cameras=()).close()
     assert "pixels" not in rmbench.make("put_back_block", cameras=(), render=False).reset(
         seed=0)[0]
 

@@ -110,7 +110,7 @@ def test_an_evaluation_folder_gives_one_column_with_its_checkpoints_history(tmp_
         {"planner_refit": {"from": str(trained), "set": {"planner_key_delay": 12}}}))
     (evals / "press_button").mkdir(parents=True)
     (evals / "run.json").write_text(json.dumps(
-        {"policy": f"mem0:{refit}?ablation=gt_classifier", "seed": 0, "episodes": 2}))
+        {"policy": f"mem0:{refit}?ablation=gt_classifier", "seed": 0, "episodes": 100}))
     (evals / "summary.json").write_text(json.dumps({"tasks": {"press_button": {
         "successes": 1, "episodes": 2, "success_rate": 0.5, "mean_progress": 0.5,
         "endings": {"success": 1, "timeout": 1}, "gym_id": "rmbench/PressButton-v2"}}}))
@@ -133,6 +133,8 @@ def test_an_evaluation_folder_gives_one_column_with_its_checkpoints_history(tmp_
     ({"split": "validation"}, "other episodes than the table's"),
     ({"seed": 5}, "other episodes than the table's"),
     ({"seeds_of": "/data"}, "other episodes than the table's"),
+    ({"episodes": 50}, "other episodes than the table's"),
+    ({"instructions": "unseen"}, "other episodes than the table's"),
     ({"policy": "POLICY"}, "evaluates mem0 .*, not mem0:gt_classifier"),
 ])
 def test_an_evaluation_folder_of_other_episodes_or_another_column_is_refused(tmp_path, run,
@@ -148,7 +150,7 @@ def test_an_evaluation_folder_of_other_episodes_or_another_column_is_refused(tmp
     (ckpt / "config.json").write_text(json.dumps({"config": {"ablations": []}}))
     evals.mkdir()
     policy = f"mem0:{ckpt}?ablation=gt_classifier"
-    run = {"policy": policy, "seed": 0, "episodes": 2,
+    run = {"policy": policy, "seed": 0, "episodes": 100,
            **{k: (f"mem0:{ckpt}" if v == "POLICY" else v) for k, v in run.items()}}
     (evals / "run.json").write_text(json.dumps(run))
     (evals / "summary.json").write_text(json.dumps({"tasks": {}}))

@@ -67,7 +67,7 @@ class RMBenchEnv(gym.Env):
         if isinstance(cameras, str):  # ("head", not its letters)
             raise ValueError(f"cameras must be a list of names, got the string {cameras!r}: "
                              f"cameras=({cameras!r},)")
-        if cameras is not None and not tuple(cameras) and render:
+        if cameras is not None and not tuple(cameras) and render and obs_type.startswith("pixels"):
             raise ValueError("cameras=() renders no camera into a pixels observation: name "
                              "some, or make the env with render=False (physics only)")
         kwargs = {} if cameras is None else {"cameras": tuple(cameras)}

@@ -134,6 +134,9 @@ def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
     return out
 
 
+TABLE_EPISODES = 100  # a table's cell: its task's first 100 test episodes
+
+
 def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
     """An ``rmbench eval`` folder of one checkpoint as a table of one column, ``spec``: its
     command and, per task, a row as ``cell_row`` gives one. Its training wall is the
@@ -143,11 +146,15 @@ def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
     runs on (record where the evaluation ran). Paths are read as the evaluation wrote them,
     so this runs where it ran."""
     run, summary = (json.loads((folder / f).read_text()) for f in ("run.json", "summary.json"))
-    if run.get("split", "test") != "test" or run.get("seeds_of") or run.get("seed", 0) != 0:
+    if (run.get("split", "test") != "test" or run.get("seeds_of") or run.get("seed", 0) != 0
+            or run.get("episodes") != TABLE_EPISODES or run.get("instructions", "seen") != "seen"):
         raise ValueError(f"{folder}: evaluated on other episodes than the table's (split "
-                         f"{run.get('split', 'test')!r}, seed {run.get('seed', 0)}"
+                         f"{run.get('split', 'test')!r}, seed {run.get('seed', 0)}, "
+                         f"{run.get('episodes')} episodes, {run.get('instructions', 'seen')} "
+                         f"instructions"
                          f"{', seeds of ' + run['seeds_of'] if run.get('seeds_of') else ''}): "
-                         f"a table reports its task's 100 test episodes")
+                         f"a table reports its task's {TABLE_EPISODES} test episodes, seen "
+                         f"instructions")
     ckpt = Path(split_policy(run["policy"])[1])
     if not (ckpt / "config.json").is_file():
         raise ValueError(f"{folder}: evaluates {run['policy']!r}, not a checkpoint found here")
