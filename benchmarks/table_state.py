@@ -55,7 +55,7 @@ from rmbench.suite.plan import split_seed, with_seed
 from rmbench.suite.records import (
     cell_record,
     evaluation_rows,
-    reads_subtask_cut,
+    measured_on,
     seed_records,
     stated_conditions,
 )
@@ -81,14 +81,6 @@ def new_table(run: dict) -> dict:
             "source": "recorded from the cells' table.json by benchmarks/table_state.py"}
 
 
-def _version(task: str, cell: dict, column: str) -> tuple:
-    """What a cell was measured on: its dataset format (where the cell depends on it) and
-    task version. Cells of one such pair are one recipe's measurements; others do not replace
-    or pool with them."""
-    fmt = cell.get("dataset") if reads_subtask_cut(task, column) else None
-    return fmt, recorded_gym_id(task, cell)
-
-
 def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:
     """The recorded cell ``old`` with ``new`` as its training seed ``seed``: every seed's
     record under ``seeds``, the cell their pool. Each seed keeps its own command; seeds of
@@ -98,7 +90,7 @@ def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> 
     if "seeds" in new:
         raise SystemExit(f"{task} {column}: the new cell pools seeds {sorted(new['seeds'])}; "
                          f"record one seed")
-    (ours, our_id), (theirs, their_id) = _version(task, new, column), _version(task, old, column)
+    (ours, our_id), (theirs, their_id) = measured_on(task, column, new), measured_on(task, column, old)
     if (ours, our_id) != (theirs, their_id):
         raise SystemExit(f"{task} {column}: seed {seed} trained on {ours} ({our_id}), the "
                          f"recorded cell on {theirs} ({their_id})")
@@ -156,7 +148,7 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                 continue
             old = doc["cells"].setdefault(task, {}).get(spec)
             same = (old is not None and not recipe_changed
-                    and _version(task, old, spec) == _version(task, new, spec))
+                    and measured_on(task, spec, old) == measured_on(task, spec, new))
             if same and "seeds" in old and "seeds" not in new:
                 raise SystemExit(f"{task} {spec}: the recorded cell pools seeds "
                                  f"{sorted(old['seeds'])}; give --seed to replace one")

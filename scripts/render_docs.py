@@ -35,7 +35,7 @@ from rmbench.eval.report import PUBLISHED, Rate, published_source
 from rmbench.files import write_atomic
 from rmbench.policies.config import split_policy
 from rmbench.suite.plan import applies
-from rmbench.suite.records import reads_subtask_cut, seed_records
+from rmbench.suite.records import measured_on, reads_subtask_cut, seed_records
 from rmbench.suite.tables import difference_table, differences
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered, recorded_gym_id
@@ -264,22 +264,14 @@ def _pixels_line(cams: dict) -> str:
             f"{done} of 9 rows measured so far (— where a cell is not yet).\n")
 
 
-def _comparable(task: str, spec: str, cell: dict, other_spec: str, other: dict) -> bool:
-    """Whether two cells of a row measure the same task version, and, where both learn the
-    subtask layout (``reads_subtask_cut``), on data of the same format: only such a pair's
-    difference is shown (two cells marked alike may still stand on different versions)."""
-    if recorded_gym_id(task, cell) != recorded_gym_id(task, other):
-        return False
-    return (not (reads_subtask_cut(task, spec) and reads_subtask_cut(task, other_spec))
-            or cell.get("dataset") == other.get("dataset"))
-
-
 def _memory_gap(res: dict, task: str) -> list[str]:
     """Mem-0 minus ``no_memory`` in points with Newcombe's 95% interval, * where it excludes 0;
-    — where either is missing or the two are not comparable (``_comparable``)."""
+    — where either is missing or the two were measured on other data or task versions
+    (``measured_on``: two cells marked alike may still stand on different versions)."""
     row = res["cells"].get(task, {})
     a, b = row.get("mem0"), row.get("mem0:no_memory")
-    if a is None or b is None or not _comparable(task, "mem0", a, "mem0:no_memory", b):
+    if a is None or b is None or (measured_on(task, "mem0", a)
+                                  != measured_on(task, "mem0:no_memory", b)):
         return ["—"]
     ra, rb = Rate.of(a), Rate.of(b)
     d, low, high = difference(ra.successes, ra.episodes, rb.successes, rb.episodes)
@@ -528,7 +520,8 @@ def state_differences() -> str:
     for t, row in res["cells"].items():
         base = set(_older(t, "mem0", row["mem0"]).strip())
         shown = {s: c for s, c in row.items() if s in specs}
-        cells[t] = {s: c for s, c in shown.items() if _comparable(t, s, c, "mem0", row["mem0"])}
+        base_on = measured_on(t, "mem0", row["mem0"])
+        cells[t] = {s: c for s, c in shown.items() if measured_on(t, s, c) == base_on}
         for s, c in shown.items():
             if s not in cells[t]:
                 marks = "".join(sorted(set(_older(t, s, c).strip()) ^ base)) or _older(t, s, c)

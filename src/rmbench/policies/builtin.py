@@ -6,13 +6,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 from typing import Any
-from urllib.parse import parse_qsl
 
 import numpy as np
 
 from rmbench.experts import make_expert
 from rmbench.policies.base import BasePolicy
-from rmbench.policies.config import split_argument
+from rmbench.policies.config import argument_ablations, split_argument
 from rmbench.policies.registry import register_policy
 
 
@@ -177,8 +176,7 @@ def _mem0(arg, env):
 
 def _mem0_reads_simulator(arg: str | None) -> bool:
     """gt_classifier takes the subtask boundary from the simulator, not the observation."""
-    query = dict(parse_qsl(split_argument(arg)[1]))
-    return "gt_classifier" in query.get("ablation", "").split(",")
+    return "gt_classifier" in argument_ablations(arg)
 
 
 register_policy("mem0", ("Mem-0 from a checkpoint: mem0:CKPT[?ablation=A,...&F=V...], F one of execute, "

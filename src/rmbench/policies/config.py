@@ -104,6 +104,12 @@ def split_argument(arg: str | None) -> tuple[str, str]:
     return path, query
 
 
+def argument_ablations(arg: str | None) -> tuple[str, ...]:
+    """The ablations ``CKPT?ablation=A,B`` names, in order (none where it names none)."""
+    query = dict(parse_qsl(split_argument(arg)[1]))
+    return tuple(a for a in query.get("ablation", "").split(",") if a)
+
+
 def split_policy(spec: str) -> tuple[str, str, str]:
     """``POLICY[:CKPT[?option=value&...]]`` as the policy's name, its checkpoint folder and its
     options' query text ("" where a part is absent)."""

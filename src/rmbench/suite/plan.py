@@ -202,6 +202,9 @@ def memory_of(spec: str, tmc: str, cfg) -> str:
     return " + ".join(parts) or "current step only"
 
 
+TABLE_EPISODES = 100  # a table's cell: its task's first 100 test episodes
+
+
 @dataclass(frozen=True)
 class Plan:
     """One table: every (task, policy) cell trained with the same recipe and evaluated on the
@@ -214,7 +217,7 @@ class Plan:
     demos: int = 50
     steps: int = 3000
     batch: int = 32
-    episodes: int = 100
+    episodes: int = TABLE_EPISODES
     noise: float = 0.0
     """Action noise executed during collection (DART), radians; ``noise_kind`` white|smooth."""
     noise_kind: str = "white"

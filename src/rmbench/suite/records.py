@@ -19,7 +19,6 @@ import itertools
 import json
 from pathlib import Path
 from typing import Any
-from urllib.parse import parse_qsl
 
 from rmbench.eval.boundaries import boundary_counts
 from rmbench.eval.endings import failures_by_stage
@@ -27,11 +26,12 @@ from rmbench.eval.intervals import ci95
 from rmbench.eval.records import read_records
 from rmbench.eval.report import Rate
 from rmbench.machine import describe
-from rmbench.policies.config import split_policy
+from rmbench.policies.config import argument_ablations, split_policy
 from rmbench.suite.cell_rows import result_row
 from rmbench.suite.clock import TIMING
-from rmbench.suite.plan import split_seed
+from rmbench.suite.plan import TABLE_EPISODES, split_seed
 from rmbench.tasks import get_task
+from rmbench.tasks.registry import recorded_gym_id
 
 KEEP = ("successes", "episodes", "success_rate", "success_ci95", "mean_progress", "endings",
         "failure_reasons", "train_wall_s", "train_wall_from_step", "eval_wall_s", "machines",
@@ -134,9 +134,6 @@ def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
     return out
 
 
-TABLE_EPISODES = 100  # a table's cell: its task's first 100 test episodes
-
-
 def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
     """An ``rmbench eval`` folder of one checkpoint as a table of one column, ``spec``: its
     command and, per task, a row as ``cell_row`` gives one. Its training wall is the
@@ -183,11 +180,17 @@ def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
 def _evaluated_spec(policy: str, config: dict[str, Any]) -> str:
     """The table column an evaluated policy is: its name with the ablations its checkpoint
     was trained with and those its argument adds (``mem0:no_key``, ``mem0:gt_classifier``)."""
-    name, _, query_text = split_policy(policy)
-    query = dict(parse_qsl(query_text))
-    ablations = [*(config.get("config", {}).get("ablations") or ()),
-                 *(a for a in query.get("ablation", "").split(",") if a)]
+    name, _, arg = policy.partition(":")
+    ablations = [*(config.get("config", {}).get("ablations") or ()), *argument_ablations(arg)]
     return name + (":" + "+".join(dict.fromkeys(ablations)) if ablations else "")
+
+
+def measured_on(task: str, column: str, cell: dict[str, Any]) -> tuple:
+    """What a cell was measured on: its dataset format (where the cell depends on it) and
+    task version. Cells of one such pair are one recipe's measurements; others do not replace,
+    pool with or stand beside them in a difference."""
+    fmt = cell.get("dataset") if reads_subtask_cut(task, column) else None
+    return fmt, recorded_gym_id(task, cell)
 
 
 def reads_subtask_cut(task: str, column: str) -> bool:

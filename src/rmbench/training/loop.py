@@ -140,7 +140,7 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     if device.type == "cuda":
         torch.cuda.set_device(device)  # (the device NCCL's object collectives use)
     flush_denormals()
-    torch.manual_seed(cfg.seed + dist.rank)
+    torch.manual_seed(rank_seed(cfg.seed, dist.rank))
     model.to(device)
     groups = model.param_groups()
     opt = torch.optim.AdamW([{"params": g["params"], "lr": g["lr"], "name": g["name"],
@@ -216,10 +216,10 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
             "wall_s": round(time.perf_counter() - t0, 1), **kept.timing()}
 
 
-def _gathered(mine: dict, world: int) -> list[dict] | None:
-    """Every rank's own state, in rank order, on every rank (None for one process)."""
+def _gathered(mine: dict, world: int) -> list[dict]:
+    """Every rank's own state, in rank order, on every rank."""
     if world == 1:
-        return None
+        return [mine]
     states: list[Any] = [None] * world
     torch.distributed.all_gather_object(states, mine)
     return states

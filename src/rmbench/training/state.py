@@ -115,14 +115,15 @@ def _on_cpu(value):
 def state_bytes(model: nn.Module, opt: torch.optim.Optimizer, identity: dict, kept: Kept,
                 data: str | None = None, ranks: list[dict] | None = None) -> bytes:
     """The training state of ``kept.step`` as ``STATE`` stores it: rank 0's own state at the
-    top level (a one-process run's), and under torchrun every rank's in ``ranks``."""
+    top level (a one-process run's), and under torchrun every rank's in ``ranks`` (each
+    rank's ``rank_state``, in rank order; this process's alone where none are given)."""
     state = {"step": kept.step, "identity": json.dumps(identity, sort_keys=True),
              "wall_s": kept.wall_s, "wall_from": kept.wall_from,
              "machines": json.dumps(kept.machines),
              "model": model.state_dict(), "optimizer": opt.state_dict(),
              "threads": torch.get_num_threads(), "data": data,
-             **(ranks[0] if ranks else rank_state(model))}
-    if ranks:
+             **(ranks or [rank_state(model)])[0]}
+    if ranks and len(ranks) > 1:
         state["ranks"] = ranks
     buf = io.BytesIO()
     torch.save(state, buf)
