@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import shutil
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,6 +27,7 @@ from rmbench.policies.feature_cache import FeatureCache  # noqa: E402
 from rmbench.policies.mem0.agent import Mem0Policy  # noqa: E402
 from rmbench.policies.mem0.config import Mem0Config  # noqa: E402
 from rmbench.policies.mem0.train import train_mem0  # noqa: E402
+from rmbench.policies.nn.efficientnet import weights_digest  # noqa: E402
 from rmbench.policies.observation import camera_inputs  # noqa: E402
 from rmbench.training.loop import TrainConfig  # noqa: E402
 from tests.conftest import roll_out  # noqa: E402
@@ -205,6 +207,35 @@ def test_mem0_trains_on_cached_features_and_round_trips(mn_dataset, tmp_path, mo
     (tmp_path / "a" / "config.json").write_text(json.dumps(config))
     with pytest.raises(CheckpointError, match="features of version 2 or earlier"):
         Mem0Policy(str(tmp_path / "a"))
+
+    # and one trained over other backbone weights than the installed ones
+    config["features_version"] = feature_cache.FEATURES_VERSION
+    assert config["backbone_weights"] == weights_digest()
+    config["backbone_weights"] = "0" * 16
+    (tmp_path / "a" / "config.json").write_text(json.dumps(config))
+    with pytest.raises(CheckpointError, match="trained over efficientnet_lite0 weights 0000"):
+        Mem0Policy(str(tmp_path / "a"))
+    del config["backbone_weights"]  # as checkpoints saved before the digest was recorded
+    (tmp_path / "a" / "config.json").write_text(json.dumps(config))
+    Mem0Policy(str(tmp_path / "a"))
+
+
+def test_the_feature_cache_and_a_resume_follow_the_backbone_weights(monkeypatch):
+    from rmbench.policies.nn import backbone
+    from rmbench.training.state import run_differences
+
+    here = feature_cache.default_dir(Path("d"), "efficientnet_lite0", 16, (96, 128))
+    assert weights_digest() in here.name
+    monkeypatch.setattr(backbone, "weights_digest", lambda: "f" * 16)
+    other = feature_cache.default_dir(Path("d"), "efficientnet_lite0", 16, (96, 128))
+    assert other != here and other.name.startswith("features-v3-efficientnet_lite0-ffff")
+
+    # a run saved before the digest was recorded resumes; one over other weights does not
+    now = {"describe": {"features_version": 3, "backbone_weights": "a" * 16}, "train": {}}
+    before = {"describe": {"features_version": 3}, "train": {}}
+    assert run_differences(before, now) == ""
+    assert "backbone_weights" in run_differences(
+        {"describe": {"features_version": 3, "backbone_weights": "b" * 16}, "train": {}}, now)
 
 
 @pytest.mark.parametrize("name", ["dp", "act"])

