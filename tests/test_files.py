@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from rmbench.files import FileFormatError, read_json_object, remove_leftovers
+from rmbench.files import FileFormatError, read_json_object, remove_leftovers, write_atomic
 
 
 def test_only_dead_writers_leftovers_are_removed(tmp_path):
@@ -62,3 +62,14 @@ def test_a_stage_record_that_is_not_an_object_reads_as_absent(tmp_path):
         assert read_json_or(path, {}) == {} and read_json_or(path, None) is None
     path.write_text('{"step": 3}')
     assert read_json_or(path, {}) == {"step": 3}
+
+
+def test_write_atomic_syncs_the_data_then_the_folder_entry(tmp_path, monkeypatch):
+    synced = []
+    real = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: synced.append(os.path.isdir(f"/proc/self/fd/{fd}"))
+                        or real(fd))
+    write_atomic(tmp_path / "a.json", b"{}\n")
+    assert synced == [False, True]  # the file's bytes before the rename, the folder after it
+    assert (tmp_path / "a.json").read_bytes() == b"{}\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["a.json"]

@@ -100,11 +100,27 @@ def _running(pid: int) -> bool:
 
 def write_atomic(path: str | Path, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically: against a kill the rename suffices; the data
-    reach the disk before it, so that a power loss cannot leave a renamed empty file."""
+    reach the disk before it, so that a power loss cannot leave a renamed empty file, and the
+    folder's entry after it, so that a power loss cannot bring back the file it replaced."""
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(data)
         f.flush()
         os.fsync(f.fileno())
+    _sync_folder(Path(path).parent)
+
+
+def _sync_folder(folder: Path) -> None:
+    """Flush ``folder``'s entries (a rename into it) to the disk, where the system allows it."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:  # (a system that cannot open a folder so: the rename stands unsynced)
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def write_json(path: str | Path, obj: Any, indent: int | None = 1) -> None:
