@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import json
 import struct
+from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +72,32 @@ def read_config(folder: str | Path, policy: str | None = None) -> dict[str, Any]
         raise CheckpointError(f"{path}: no {', '.join(map(repr, missing or ['config']))} "
                               f"{'field' if len(missing) < 2 else 'fields'} (damaged)")
     return config
+
+
+def load_policy(folder: str | Path, policy: str, config_cls: type,
+                build: Callable[[Any, dict[str, Any]], torch.nn.Module],
+                overrides: dict[str, Any] | None = None,
+                adjust: Callable[[Any], Any] | None = None, env=None):
+    """(model in eval mode, config, describe) of ``policy``'s checkpoint in ``folder``: its
+    recorded config (passed through ``adjust``, then ``overrides`` replacing fields), the
+    features it trained on checked against those this rmbench computes, the model built by
+    ``build(config, describe)`` and its weights loaded; with ``env``, the task checked too.
+    Anything a checkpoint can be wrong in is a one-line CheckpointError."""
+    from rmbench.policies.feature_cache import check_features
+
+    describe = read_config(folder, policy)
+    try:
+        cfg = config_cls.from_dict(describe["config"])
+        cfg = replace(adjust(cfg) if adjust else cfg, **(overrides or {}))
+    except (TypeError, ValueError, ZeroDivisionError) as err:  # (a config edited by hand)
+        if isinstance(err, CheckpointError):
+            raise
+        raise CheckpointError(f"{folder}: {err}") from None
+    check_features(folder, describe, cfg)
+    model = build(cfg, describe)
+    load_weights(folder, model, describe["step"])
+    check_task(folder, describe, env)
+    return model.eval(), cfg, describe
 
 
 def check_task(folder: str | Path, describe: dict[str, Any], env) -> None:

@@ -34,17 +34,13 @@ from rmbench.data.reader import Dataset
 from rmbench.data.torch_dataset import DemoDataset, RandomFrameSampler
 from rmbench.policies.base import BasePolicy
 from rmbench.policies.checkpoint import (
-    CheckpointError,
-    check_task,
     dataset_record,
-    load_weights,
-    read_config,
+    load_policy,
     save_checkpoint,
     saved_step,
 )
 from rmbench.policies.config import PolicyConfig, parse_argument
 from rmbench.policies.feature_cache import (
-    check_features,
     features_key,
     features_record,
     with_features,
@@ -284,15 +280,10 @@ class VisuomotorPolicy(BasePolicy):
 
     def __init__(self, arg: str, env=None):
         path, overrides, _ = parse_argument(arg, self.config_cls)
-        describe = read_config(path, self.name)
-        try:
-            cfg = replace(self.config_cls.from_dict(describe["config"]), **overrides)
-        except (TypeError, ValueError) as err:
-            raise CheckpointError(f"{path}: {err}") from None
-        check_features(path, describe, cfg)
-        model = self.model_cls(cfg, len(describe.get("state_names") or ()))
-        load_weights(path, model, describe["step"])
-        check_task(path, describe, env)
+        model, _, describe = load_policy(
+            path, self.name, self.config_cls,
+            lambda cfg, describe: self.model_cls(cfg, len(describe.get("state_names") or ())),
+            overrides, env=env)
         self._setup(model, describe)
 
     @classmethod

@@ -36,10 +36,9 @@ import torch
 
 from rmbench.policies.action_space import EEActions
 from rmbench.policies.base import BasePolicy
-from rmbench.policies.checkpoint import CheckpointError, check_task, load_weights, read_config
+from rmbench.policies.checkpoint import CheckpointError, load_policy
 from rmbench.policies.config import parse_argument
 from rmbench.policies.ensemble import TemporalEnsemble
-from rmbench.policies.feature_cache import check_features
 from rmbench.policies.mem0.classifier import Debounce
 from rmbench.policies.mem0.config import TRAINED_ABLATIONS, Mem0Config
 from rmbench.policies.mem0.memory import EventWindow, MemoryStore
@@ -51,28 +50,18 @@ from rmbench.video import FrameCodec
 
 
 def load_mem0(path: str | Path, ablations: tuple[str, ...] = (),
-              overrides: dict[str, Any] | None = None):
+              overrides: dict[str, Any] | None = None, env=None):
     """(model, config, describe) from a checkpoint; inference ablations added and inference
-    fields (``Mem0Config.INFERENCE_FIELDS``) overridden."""
-    describe = read_config(path, "mem0")
-    try:
-        cfg = Mem0Config.from_dict(describe["config"])
-    except (TypeError, ValueError, ZeroDivisionError) as err:  # (a config edited by hand)
-        raise CheckpointError(f"{path}: {err}") from None
-    missing = [a for a in ablations if a in TRAINED_ABLATIONS and a not in cfg.ablations]
-    if missing:
-        raise CheckpointError(f"{path} was trained without {missing[0]}, which changes training: "
-                              f"rmbench train mem0 --ablation {missing[0]}")
-    try:
-        cfg = replace(cfg, ablations=tuple(dict.fromkeys(cfg.ablations + ablations)),
-                      **(overrides or {}))
-    except (TypeError, ValueError) as err:
-        raise CheckpointError(f"{path}: {err}") from None
-    check_features(path, describe, cfg)
-    model = build_model(cfg, describe)
-    load_weights(path, model, describe["step"])
-    model.eval()
-    return model, cfg, describe
+    fields (``Mem0Config.INFERENCE_FIELDS``) overridden; with ``env``, its task checked."""
+
+    def add_ablations(cfg: Mem0Config) -> Mem0Config:
+        missing = [a for a in ablations if a in TRAINED_ABLATIONS and a not in cfg.ablations]
+        if missing:
+            raise CheckpointError(f"{path} was trained without {missing[0]}, which changes "
+                                  f"training: rmbench train mem0 --ablation {missing[0]}")
+        return replace(cfg, ablations=tuple(dict.fromkeys(cfg.ablations + ablations)))
+
+    return load_policy(path, "mem0", Mem0Config, build_model, overrides, add_ablations, env)
 
 
 class _Slot:
@@ -117,8 +106,7 @@ class Mem0Policy(BasePolicy):
     def __init__(self, arg: str, env=None):
         path, overrides, options = parse_argument(arg, Mem0Config, extra=("ablation",))
         ablations = tuple(a for a in options.get("ablation", "").split(",") if a)
-        model, cfg, describe = load_mem0(path, ablations, overrides)
-        check_task(path, describe, env)
+        model, cfg, describe = load_mem0(path, ablations, overrides, env)
         self._setup(model, cfg, describe, env)
 
     @classmethod
