@@ -89,9 +89,9 @@ def load_policy(folder: str | Path, policy: str, config_cls: type,
     try:
         cfg = config_cls.from_dict(describe["config"])
         cfg = replace(adjust(cfg) if adjust else cfg, **(overrides or {}))
+    except CheckpointError:  # (``adjust``'s own, already one line)
+        raise
     except (TypeError, ValueError, ZeroDivisionError) as err:  # (a config edited by hand)
-        if isinstance(err, CheckpointError):
-            raise
         raise CheckpointError(f"{folder}: {err}") from None
     check_features(folder, describe, cfg)
     model = build(cfg, describe)

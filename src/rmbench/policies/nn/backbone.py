@@ -45,18 +45,21 @@ def feature_shape(stride: int, size: tuple[int, int]) -> tuple[int, int, int]:
     return FEATURE_CHANNELS[stride], math.ceil(size[0] / stride), math.ceil(size[1] / stride)
 
 
-def frozen_weights(name: str) -> str:
-    """Which weights the frozen backbone ``name`` loads (a digest of its installed file)."""
+def _check_frozen(name: str) -> None:
     if name != EFFICIENTNET_LITE0:
         raise ValueError(f"no frozen backbone {name!r}; frozen backbones: {EFFICIENTNET_LITE0}")
+
+
+def frozen_weights(name: str) -> str:
+    """Which weights the frozen backbone ``name`` loads (a digest of its installed file)."""
+    _check_frozen(name)
     return weights_digest()
 
 
 @functools.cache
 def frozen_backbone(name: str) -> FoldedLite0:
     """The process's one instance of the backbone: ImageNet weights, folded for inference."""
-    if name != EFFICIENTNET_LITE0:
-        raise ValueError(f"no frozen backbone {name!r}; frozen backbones: {EFFICIENTNET_LITE0}")
+    _check_frozen(name)
     return FoldedLite0(load_pretrained())
 
 

