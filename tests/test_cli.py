@@ -81,3 +81,22 @@ def test_open_loop_refuses_a_policy_that_reads_the_simulator(dataset, capsys):
     assert main(["open-loop", "--policy", "expert", "--dataset", str(dataset)]) == 2
     assert "reads the simulator, which open-loop does not run" in _one_line(capsys)
     assert main(["open-loop", "--policy", "random", "--dataset", str(dataset), "--json"]) == 0
+
+
+def test_sizes_are_width_by_height_everywhere(tmp_path, capsys):
+    """``--resolution`` and ``--frame-max`` read the same ``WxH``; a size that is not two
+    positive whole numbers is argparse's one-line refusal before a folder is made."""
+    import argparse
+
+    import pytest
+
+    from rmbench.cli.common import width_height
+
+    assert width_height("320x240") == (320, 240) and width_height("640X480") == (640, 480)
+    for bad in ("-5x3", "0x240", "320", "320x", "x240", "3.5x2", "320x240x3"):
+        with pytest.raises(argparse.ArgumentTypeError, match="expected WIDTHxHEIGHT"):
+            width_height(bad)
+    with pytest.raises(SystemExit):
+        main(["collect", "put_back_block", "--episodes", "1", "--resolution=-320x240",
+              "--out", str(tmp_path / "d")])
+    assert "expected WIDTHxHEIGHT" in capsys.readouterr().err and not (tmp_path / "d").exists()

@@ -329,7 +329,7 @@ def test_serve_cli_refuses_bad_flags_in_one_line(capsys):
     assert "max_connections must be >= 1" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["serve", "--policy", "random", "--task", TASK, "--frame-max", "640"])
-    assert "expected HEIGHTxWIDTH" in capsys.readouterr().err
+    assert "expected WIDTHxHEIGHT" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("timeout", [0, -1, float("nan"), float("inf"), 1e10])

@@ -26,3 +26,15 @@ def whole(minimum: int, maximum: int | None = None):
     parse.__name__ = (f"whole number >= {minimum}" if maximum is None
                       else f"whole number in [{minimum}, {maximum}]")
     return parse
+
+
+def width_height(text: str) -> tuple[int, int]:
+    """An argparse type: ``WxH`` (width first, as every size on the command line is given)
+    -> (W, H), both whole numbers of at least 1."""
+    w, sep, h = text.lower().partition("x")
+    if not (sep and w.isdigit() and h.isdigit() and int(w) > 0 and int(h) > 0):
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 320x240, got {text!r}")
+    return int(w), int(h)
+
+
+width_height.__name__ = "WIDTHxHEIGHT"

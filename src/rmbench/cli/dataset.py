@@ -2,18 +2,9 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 
-from rmbench.cli.common import add_json
-
-
-def _resolution(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"resolution must look like 320x240, got {text!r}") from None
-    return w, h
+from rmbench.cli.common import add_json, width_height
 
 
 def cmd_collect(args) -> int:
@@ -78,7 +69,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--workers", type=int, default=1, help="local worker processes")
     p.add_argument("--cameras", nargs="+", metavar="CAM",
                    help="cameras to record (default: head left_wrist right_wrist)")
-    p.add_argument("--resolution", type=_resolution, default=(320, 240), metavar="WxH")
+    p.add_argument("--resolution", type=width_height, default=(320, 240), metavar="WxH")
     p.add_argument("--search", choices=["search", "direct"], default="search",
                    help="search: solve each seed without rendering, then record a replay; "
                    "direct: record while solving, drop failures")

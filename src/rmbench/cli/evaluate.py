@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from rmbench.cli.common import add_json, whole
+from rmbench.cli.common import add_json, whole, width_height
 from rmbench.seeds import SPLITS
 from rmbench.suite.recipes import add_recipe_arguments
 
@@ -142,7 +142,7 @@ def cmd_serve(args) -> int:
 
     PolicyServer(args.policy, get_task(args.task).name, args.host, args.port,
                  max_connections=args.max_connections, idle_timeout=args.idle_timeout,
-                 origins=args.origin, frame_max=args.frame_max).serve_forever()
+                 origins=args.origin, frame_max=args.frame_max[::-1]).serve_forever()
     return 0
 
 
@@ -173,14 +173,6 @@ def policy_parser(sub, name: str, help: str) -> argparse.ArgumentParser:
     p.add_argument("-h", "--help", action=PolicyHelp,
                    help="show this help message, with the registered policies, and exit")
     return p
-
-
-def frame_size(text: str) -> tuple[int, int]:
-    """``HxW`` -> (H, W), for argparse."""
-    h, sep, w = text.partition("x")
-    if not (sep and h.isdigit() and w.isdigit() and int(h) > 0 and int(w) > 0):
-        raise argparse.ArgumentTypeError(f"expected HEIGHTxWIDTH, e.g. 480x640, got {text!r}")
-    return int(h), int(w)
 
 
 def add_parsers(sub) -> None:
@@ -293,6 +285,6 @@ def add_parsers(sub) -> None:
     p.add_argument("--origin", action="append", metavar="ORIGIN",
                    help="accept only browsers' connections from this Origin (repeatable); "
                         "default: no check (a web page on this machine can then connect)")
-    p.add_argument("--frame-max", type=frame_size, default=(480, 640), metavar="HxW",
-                   help="the largest camera frame accepted (default 480x640)")
+    p.add_argument("--frame-max", type=width_height, default=(640, 480), metavar="WxH",
+                   help="the largest camera frame accepted (default 640x480)")
     p.set_defaults(func=cmd_serve)

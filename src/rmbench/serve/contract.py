@@ -55,7 +55,7 @@ class Contract:
                                             or self.frame_size[0] > self.frame_max[1]):
             w, h = self.frame_size
             raise ValueError(f"the policy reads {w}x{h} frames, larger than frame_max "
-                             f"{self.frame_max[0]}x{self.frame_max[1]} (H x W)")
+                             f"{self.frame_max[1]}x{self.frame_max[0]} (WxH)")
         if not 0 <= self.batch <= MAX_SLOTS:
             raise ValueError(f"batch must be in [0, {MAX_SLOTS}], got {self.batch}")
 
