@@ -47,7 +47,8 @@ MARKER = re.compile(r"(<!-- table:([\w-]+) -->\n)(.*?)(<!-- /table -->)", re.S)
 
 COLUMN = {"mem0": "Mem-0", "mem0:no_memory": "`no_memory`", "mem0:no_anchor": "`no_anchor`",
           "mem0:no_sliding": "`no_sliding`", "mem0:no_key": "`no_key`",
-          "mem0:gt_classifier": "`gt_classifier`", "dp": "DP", "act": "ACT"}
+          "mem0:gt_classifier": "`gt_classifier`", "dp": "DP", "act": "ACT",
+          "mem0:no_memory+no_key": "`no_memory+no_key`"}
 
 
 def load(name: str) -> dict:
@@ -430,7 +431,7 @@ def pixels_cost() -> str:
 
 def pixels_ablations() -> str:
     res = pixel_table()
-    specs = ["mem0", "mem0:no_key", "mem0:gt_classifier"]
+    specs = ["mem0", "mem0:no_key", "mem0:gt_classifier", "mem0:no_memory+no_key"]
     header = ["task", "TMC", *(f"{COLUMN[s]} (cameras)" for s in specs), "chance"]
     rows = _state_rows(res, specs, lambda t: _chance(res, t),
                        lambda g, w=(): _chance_avg(res, g, w))
@@ -483,7 +484,7 @@ def _beside_published(rows: list[list[str]], specs: list[str]) -> list[list[str]
 def state_ablations() -> str:
     res = load("table_state.json")
     specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
-             "mem0:gt_classifier"]
+             "mem0:gt_classifier", "mem0:no_memory+no_key"]
     header = ["task", "TMC", *(COLUMN[s] for s in specs), "chance"]
     rows = _state_rows(res, specs, lambda t: _chance(res, t),
                        lambda g, w=(): _chance_avg(res, g, w))
@@ -493,7 +494,8 @@ def state_ablations() -> str:
     return (table + "\nrmbench's cells read the state observation; in parentheses: the paper's "
             f"rate, read from cameras (arXiv {published_source('ablations')}; "
             f"{paper.rollouts()} rollouts each), where {_and([COLUMN[s] for s in ours])} are its "
-            f"{_and([names[s] for s in ours])} ({COLUMN['mem0:no_memory']} is not in it); an "
+            f"{_and([names[s] for s in ours])} ({_and([COLUMN[s] for s in specs if s not in names])}"
+            " are not in it); an "
             "average is the paper's where it states one, else the mean of its tasks.\n"
             + _without_line(res) + _footnote(table))
 
@@ -513,7 +515,7 @@ def state_differences() -> str:
     difference (``suite.tables.differences``), * where it excludes zero."""
     res = load("table_state.json")
     specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
-             "mem0:gt_classifier"]
+             "mem0:gt_classifier", "mem0:no_memory+no_key"]
     # a difference only between cells measured on the same data format and task version; a
     # pair kept apart reads "—" with the marks that kept it apart
     cells, apart = {}, {}

@@ -38,9 +38,11 @@ from rmbench.training.device import check_device
 from rmbench.video_rule import keeps_video
 
 POLICY_NAMES = ("mem0", "dp", "act")
-# every column of the two tables: policies, then Mem-0's ablations
+# every column of the two tables: policies, then Mem-0's ablations. On an M(n) row
+# ``no_memory`` keeps the planner's key memory; ``no_memory+no_key`` is Mem-0 with no memory of
+# the past beyond the end classifier's window of recent frames, the row's memoryless control.
 ALL_POLICIES = ("mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "dp", "act",
-                "mem0:no_key", "mem0:gt_classifier")
+                "mem0:no_key", "mem0:gt_classifier", "mem0:no_memory+no_key")
 M_N_ONLY = ("no_key", "gt_classifier")
 OBSERVATIONS = ("state", "pixels")
 # what collection records for each observation: the state's smallest video (datasets hold at

@@ -28,7 +28,7 @@ from rmbench.tasks import get_task
 
 POLICY_TABLE = ("mem0", "mem0:no_memory", "dp", "act")
 ABLATION_TABLE = ("mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
-                  "mem0:gt_classifier")
+                  "mem0:gt_classifier", "mem0:no_memory+no_key")
 
 
 def results(plan: Plan, out: Path, command: str = "",
