@@ -65,7 +65,8 @@ RESULTS = Path(__file__).resolve().parent / "results"
 OUT = RESULTS / "table_state.json"
 # the camera table's command, what its results page opens with
 PIXELS_COMMAND = ("rmbench table --obs pixels --tasks all --policies "
-                  "mem0,mem0:no_memory,mem0:no_key,mem0:gt_classifier,dp,act "
+                  "mem0,mem0:no_memory,mem0:no_key,mem0:gt_classifier,mem0:no_memory+no_key,"
+                  "dp,act "
                   "--out runs/table_pixels --jobs 2")
 
 

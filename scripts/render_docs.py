@@ -392,7 +392,8 @@ def pixels_cost() -> str:
     counted."""
     res = pixel_table()
     walls = res.get("data_walls", {})
-    specs = ["mem0", "mem0:no_memory", "mem0:no_key", "mem0:gt_classifier", "dp", "act"]
+    specs = ["mem0", "mem0:no_memory", "mem0:no_key", "mem0:gt_classifier",
+             "mem0:no_memory+no_key", "dp", "act"]
     rows, notes = [], []
     for task in ordered():
         cells = {s: c for s, c in res["cells"][task.name].items() if s in specs and c}

@@ -93,10 +93,30 @@ def test_sizes_are_width_by_height_everywhere(tmp_path, capsys):
     from rmbench.cli.common import width_height
 
     assert width_height("320x240") == (320, 240) and width_height("640X480") == (640, 480)
-    for bad in ("-5x3", "0x240", "320", "320x", "x240", "3.5x2", "320x240x3"):
+    for bad in ("-5x3", "0x240", "320", "320x", "x240", "3.5x2", "320x240x3", "\u00b2x3"):
         with pytest.raises(argparse.ArgumentTypeError, match="expected WIDTHxHEIGHT"):
             width_height(bad)
     with pytest.raises(SystemExit):
         main(["collect", "put_back_block", "--episodes", "1", "--resolution=-320x240",
               "--out", str(tmp_path / "d")])
     assert "expected WIDTHxHEIGHT" in capsys.readouterr().err and not (tmp_path / "d").exists()
+
+
+def test_serve_gives_the_server_its_frame_max_as_height_by_width(monkeypatch):
+    """``--frame-max 640x360`` (WxH, as on every command) reaches the server as the frames'
+    array shape (360, 640)."""
+    import rmbench.serve.server as server
+
+    seen = {}
+
+    class Recorded:
+        def __init__(self, *args, frame_max, **kwargs):
+            seen["frame_max"] = frame_max
+
+        def serve_forever(self):
+            return None
+
+    monkeypatch.setattr(server, "PolicyServer", Recorded)
+    assert main(["serve", "--policy", "random", "--task", "put_back_block",
+                 "--frame-max", "640x360"]) == 0
+    assert tuple(seen["frame_max"]) == (360, 640)

@@ -240,6 +240,12 @@ def test_jobs_wait_for_what_they_read(tmp_path):
     assert needs[mem0] == (collect,) and needs[no_key] == (collect, mem0)
     assert executor_spec("mem0:no_key@1") == "mem0@1" and executor_spec("mem0:no_anchor") is None
     assert executor_spec("mem0:no_anchor+no_key") == "mem0:no_anchor"
+    # the M(n) memoryless control takes no_memory's executor, and is no M(1) column
+    both = Plan("state", ("press_button", "put_back_block"), ("mem0:no_memory+no_key",))
+    needs = schedule.plan_jobs(both, tmp_path)
+    executor = J("train", "press_button", "mem0:no_memory")
+    assert needs[J("train", "press_button", "mem0:no_memory+no_key")] == (collect, executor)
+    assert not any(j.task == "put_back_block" for j in needs)
 
 
 def test_a_stage_s_clock_is_kept_while_it_runs(tmp_path):

@@ -32,7 +32,8 @@ def width_height(text: str) -> tuple[int, int]:
     """An argparse type: ``WxH`` (width first, as every size on the command line is given)
     -> (W, H), both whole numbers of at least 1."""
     w, sep, h = text.lower().partition("x")
-    if not (sep and w.isdigit() and h.isdigit() and int(w) > 0 and int(h) > 0):
+    if not (sep and all(v.isascii() and v.isdecimal() for v in (w, h))
+            and int(w) > 0 and int(h) > 0):
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 320x240, got {text!r}")
     return int(w), int(h)
 

@@ -238,10 +238,10 @@ def add_parsers(sub) -> None:
     p.add_argument("--obs", choices=("state", "pixels"), required=True)
     p.add_argument("--tasks", default="all", help="comma-separated task names, or all")
     p.add_argument("--policies", default=None,
-                   help="comma-separated: mem0, mem0:ABLATION (no_anchor, no_sliding, "
-                        "no_memory, no_key, gt_classifier), dp, act (default: all of them; "
-                        "no_key and gt_classifier on M(n) tasks only); SPEC@N: trained with "
-                        "seed N")
+                   help="comma-separated: mem0, mem0:ABLATION[+ABLATION...] (no_anchor, "
+                        "no_sliding, no_memory, no_key, gt_classifier), dp, act (default: "
+                        "those and mem0:no_memory+no_key; a column with no_key or "
+                        "gt_classifier on M(n) tasks only); SPEC@N: trained with seed N")
     p.add_argument("--train-seeds", default="0", metavar="N[,N...]",
                    help="train every column with each of these seeds; its cell pools their "
                         "evaluations (the mean over seeds), each seed's row kept (default 0)")
