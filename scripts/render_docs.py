@@ -796,7 +796,10 @@ def _train_wall(cell: dict, seed: str, named: bool, machines: dict[str, dict]) -
     if "planner_refit" in cell:
         wall += " (the executor), then its planner refit (`benchmarks/planner_refit.py`)"
     if "executor_of" in cell:
-        wall += " (its planner's fit; its executor is Mem-0's)"
+        # the run folder whose executor it took: Mem-0's, or a trained ablation's
+        source = str(cell["executor_of"]).split("-s")[0].removeprefix("mem0-")
+        owner = "Mem-0's" if source == "mem0" else f"`{source}`'s"
+        wall += f" (its planner's fit; its executor is {owner})"
     return f"{wall} (seed {seed})" if named else wall
 
 
