@@ -321,7 +321,7 @@ def test_cli_check_and_collect_errors_are_one_line(dataset, tmp_path, capsys):
     assert "other arguments" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_:  # argparse's own usage error
         main(["collect", TASK, "--out", str(tmp_path / "x"), "--resolution", "320by240"])
-    assert exit_.value.code == 2 and "resolution must look like 320x240" in capsys.readouterr().err
+    assert exit_.value.code == 2 and "expected WIDTHxHEIGHT, e.g. 320x240" in capsys.readouterr().err
 
 
 def test_every_push_of_press_button_is_its_own_subtask():

@@ -150,6 +150,10 @@ def train(model: nn.Module, batches: BatchSource, cfg: TrainConfig, out: str | P
     defaults = json.loads(json.dumps(config_defaults or {}))
     kept = resume(out, model, opt, identity, defaults, device, data, dist.rank)
     start = kept.step
+    if dist.world > 1:
+        # every rank has read the folder before rank 0 writes into it: a rank still reading it
+        # would otherwise see rank 0's STARTED (or its temporary file) and refuse the folder
+        torch.distributed.barrier()
     if dist.rank == 0:
         for folder in (out, out / STATE.parent):  # what writers killed before a rename left
             remove_leftovers(folder)
