@@ -34,9 +34,9 @@ from rmbench.eval.intervals import difference, format_difference, format_rate
 from rmbench.eval.report import PUBLISHED, Rate, published_source
 from rmbench.files import write_atomic
 from rmbench.policies.config import split_policy
-from rmbench.suite.plan import applies
+from rmbench.suite.plan import applies, executor_spec
 from rmbench.suite.records import measured_on, reads_subtask_cut, seed_records
-from rmbench.suite.tables import difference_table, differences
+from rmbench.suite.tables import ABLATION_TABLE, difference_table, differences
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered, recorded_gym_id
 
@@ -484,8 +484,7 @@ def _beside_published(rows: list[list[str]], specs: list[str]) -> list[list[str]
 
 def state_ablations() -> str:
     res = load("table_state.json")
-    specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
-             "mem0:gt_classifier", "mem0:no_memory+no_key"]
+    specs = list(ABLATION_TABLE)
     header = ["task", "TMC", *(COLUMN[s] for s in specs), "chance"]
     rows = _state_rows(res, specs, lambda t: _chance(res, t),
                        lambda g, w=(): _chance_avg(res, g, w))
@@ -515,8 +514,7 @@ def state_differences() -> str:
     """Mem-0 minus each ablation per task, in points, with Newcombe's 95% interval of the
     difference (``suite.tables.differences``), * where it excludes zero."""
     res = load("table_state.json")
-    specs = ["mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
-             "mem0:gt_classifier", "mem0:no_memory+no_key"]
+    specs = list(ABLATION_TABLE)
     # a difference only between cells measured on the same data format and task version; a
     # pair kept apart reads "—" with the marks that kept it apart
     cells, apart = {}, {}
@@ -774,7 +772,8 @@ def _record_rows(cells: dict[str, dict[str, dict]], machines: dict[str, dict] | 
                 if named else "")
             train = ("(Mem-0's checkpoint)" if spec == "mem0:gt_classifier" and not named
                      else "(Mem-0's checkpoints)" if spec == "mem0:gt_classifier"
-                     else " + ".join(_train_wall(r, s, named, machines) for s, r in seeds.items()))
+                     else " + ".join(_train_wall(r, spec, s, named, machines)
+                                     for s, r in seeds.items()))
             failures = rec.get("failures") or "; ".join(
                 f"{why} {n}" for why, n in list(c["failure_reasons"].items())[:4])
             evals = " + ".join(_seed_wall(r, "eval", s, named, machines) for s, r in seeds.items())
@@ -790,16 +789,14 @@ def _seed_wall(cell: dict, stage: str, seed: str, named: bool, machines: dict[st
     return f"{wall} (seed {seed})" if named else wall
 
 
-def _train_wall(cell: dict, seed: str, named: bool, machines: dict[str, dict]) -> str:
+def _train_wall(cell: dict, spec: str, seed: str, named: bool,
+                machines: dict[str, dict]) -> str:
     """One training's wall; a planner refit's is its executor's, the refit said so."""
     wall = _seed_wall(cell, "train", seed, False, machines)
     if "planner_refit" in cell:
         wall += " (the executor), then its planner refit (`benchmarks/planner_refit.py`)"
     if "executor_of" in cell:
-        # the run folder whose executor it took: Mem-0's, or a trained ablation's
-        source = str(cell["executor_of"]).split("-s")[0].removeprefix("mem0-")
-        owner = "Mem-0's" if source == "mem0" else f"`{source}`'s"
-        wall += f" (its planner's fit; its executor is {owner})"
+        wall += f" (its planner's fit; its executor is {COLUMN[executor_spec(spec)]}'s)"
     return f"{wall} (seed {seed})" if named else wall
 
 
