@@ -36,7 +36,13 @@ from rmbench.files import write_atomic
 from rmbench.policies.config import split_policy
 from rmbench.suite.plan import applies, executor_spec
 from rmbench.suite.records import measured_on, reads_subtask_cut, seed_records
-from rmbench.suite.tables import ABLATION_TABLE, difference_table, differences
+from rmbench.suite.tables import (
+    ABLATION_TABLE,
+    PIXEL_TABLE,
+    POLICY_TABLE,
+    difference_table,
+    differences,
+)
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered, recorded_gym_id
 
@@ -220,7 +226,7 @@ def _published_avg(policy: str, group: str, without: tuple[str, ...] = ()) -> st
 
 def readme_results() -> str:
     res, cams = load("table_state.json"), pixel_table()
-    specs = ["mem0", "mem0:no_memory", "dp", "act"]
+    specs = list(POLICY_TABLE)
     header = ["task", "TMC", *(f"{COLUMN[s]} (state)" for s in specs),
               *(f"{COLUMN[s]} (cameras)" for s in PIXEL_MAIN), "chance",
               "Mem-0 (published, cameras)"]
@@ -281,7 +287,7 @@ def _memory_gap(res: dict, task: str) -> list[str]:
 
 def pixels_policies() -> str:
     res, state = pixel_table(), load("table_state.json")
-    specs = ["mem0", "mem0:no_memory", "dp", "act"]
+    specs = list(POLICY_TABLE)
     header = ["task", "TMC", *(f"{COLUMN[s]} (cameras)" for s in specs),
               "Mem-0 − `no_memory` (points)", "Mem-0 (state)", "Mem-0 (published, cameras)",
               "chance"]
@@ -392,8 +398,7 @@ def pixels_cost() -> str:
     counted."""
     res = pixel_table()
     walls = res.get("data_walls", {})
-    specs = ["mem0", "mem0:no_memory", "mem0:no_key", "mem0:gt_classifier",
-             "mem0:no_memory+no_key", "dp", "act"]
+    specs = PIXEL_TABLE
     rows, notes = [], []
     for task in ordered():
         cells = {s: c for s, c in res["cells"][task.name].items() if s in specs and c}
@@ -445,7 +450,7 @@ def pixels_ablations() -> str:
 
 def state_policies() -> str:
     res = load("table_state.json")
-    specs = ["mem0", "mem0:no_memory", "dp", "act"]
+    specs = list(POLICY_TABLE)
     published = list(PUBLISHED)
     header = ["task", "TMC", *(f"{COLUMN[s]} (state)" for s in specs),
               *(f"{p} (published, cameras)" for p in published), "chance"]
