@@ -34,11 +34,10 @@ from rmbench.eval.intervals import difference, format_difference, format_rate
 from rmbench.eval.report import PUBLISHED, Rate, published_source
 from rmbench.files import write_atomic
 from rmbench.policies.config import split_policy
-from rmbench.suite.plan import applies, executor_spec
+from rmbench.suite.plan import COLUMNS, applies, executor_spec
 from rmbench.suite.records import measured_on, reads_subtask_cut, seed_records
 from rmbench.suite.tables import (
     ABLATION_TABLE,
-    PIXEL_TABLE,
     POLICY_TABLE,
     difference_table,
     differences,
@@ -398,7 +397,7 @@ def pixels_cost() -> str:
     counted."""
     res = pixel_table()
     walls = res.get("data_walls", {})
-    specs = PIXEL_TABLE
+    specs = COLUMNS["pixels"]
     rows, notes = [], []
     for task in ordered():
         cells = {s: c for s, c in res["cells"][task.name].items() if s in specs and c}

@@ -29,6 +29,8 @@ from rmbench.suite import (
     versions,
 )
 from rmbench.suite.plan import (
+    ALL_POLICIES,
+    COLUMNS,
     Plan,
     applies,
     bounded,
@@ -370,6 +372,24 @@ def test_report_only_writes_the_whole_table_from_cells_run_apart(toy_table, tmp_
     capsys.readouterr()
     assert cli([*[a if a != str(out) else str(tmp_path / "none") for a in args], "--report-only"]) == 2
     assert "rmbench: error: no table at" in capsys.readouterr().err
+
+
+def test_each_observation_makes_its_own_columns_unless_told(monkeypatch, tmp_path):
+    """The camera table leaves out no_anchor and no_sliding; --policies still names any."""
+    planned = []
+
+    def record(plan, out, jobs, backend):
+        planned.append(plan.policies)
+        raise ValueError("planned")
+
+    monkeypatch.setattr(runner, "run", record)
+    for obs, more in (("state", []), ("pixels", []), ("pixels", ["--policies", "mem0:no_anchor"])):
+        cli(["table", "--obs", obs, "--tasks", "press_button", "--out", str(tmp_path), *more])
+    state, pixels, named = planned
+    assert state == ALL_POLICIES and pixels == COLUMNS["pixels"] == (
+        "mem0", "mem0:no_memory", "dp", "act", "mem0:no_key", "mem0:gt_classifier",
+        "mem0:no_memory+no_key")
+    assert named == ("mem0:no_anchor",)
 
 
 def test_learning_benchmark_is_the_table_for_one_task(toy_table, tmp_path):

@@ -95,13 +95,13 @@ def cmd_table(args) -> int:
     from pathlib import Path
 
     from rmbench.suite import data_stage, runner, tables
-    from rmbench.suite.plan import ALL_POLICIES, Plan, with_seed
+    from rmbench.suite.plan import COLUMNS, Plan, with_seed
     from rmbench.suite.recipes import RECIPES, recipe_of
     from rmbench.tasks.registry import ordered
 
     tasks = ([t.name for t in ordered()] if args.tasks == "all"
              else [t.strip() for t in args.tasks.split(",") if t.strip()])
-    policies = [p.strip() for p in (args.policies or ",".join(ALL_POLICIES)).split(",") if p.strip()]
+    policies = [p.strip() for p in (args.policies or ",".join(COLUMNS[args.obs])).split(",") if p.strip()]
     try:
         seeds = [int(s) for s in args.train_seeds.split(",") if s.strip()]
     except ValueError:
@@ -240,8 +240,9 @@ def add_parsers(sub) -> None:
     p.add_argument("--policies", default=None,
                    help="comma-separated: mem0, mem0:ABLATION[+ABLATION...] (no_anchor, "
                         "no_sliding, no_memory, no_key, gt_classifier), dp, act (default: "
-                        "those and mem0:no_memory+no_key; a column with no_key or "
-                        "gt_classifier on M(n) tasks only); SPEC@N: trained with seed N")
+                        "those and mem0:no_memory+no_key; with --obs pixels all but no_anchor "
+                        "and no_sliding; a column with no_key or gt_classifier on M(n) tasks "
+                        "only); SPEC@N: trained with seed N")
     p.add_argument("--train-seeds", default="0", metavar="N[,N...]",
                    help="train every column with each of these seeds; its cell pools their "
                         "evaluations (the mean over seeds), each seed's row kept (default 0)")

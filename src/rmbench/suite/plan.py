@@ -45,6 +45,12 @@ ALL_POLICIES = ("mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "
                 "mem0:no_key", "mem0:gt_classifier", "mem0:no_memory+no_key")
 M_N_ONLY = ("no_key", "gt_classifier")
 OBSERVATIONS = ("state", "pixels")
+# the columns ``rmbench table --obs OBS`` makes unless --policies names others: the state table
+# every one; the camera table the policies and the ablations that test memory (no_anchor and
+# no_sliding, which split the executor's memory in two, would cost two trainings more a row)
+COLUMNS = {"state": ALL_POLICIES,
+           "pixels": tuple(p for p in ALL_POLICIES
+                           if p not in ("mem0:no_anchor", "mem0:no_sliding"))}
 # what collection records for each observation: the state's smallest video (datasets hold at
 # least one camera; nothing decodes it), or the three cameras as evaluation renders them
 COLLECT_CAMERAS = {"state": (("head",), (16, 16)),

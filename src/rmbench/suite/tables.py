@@ -27,10 +27,6 @@ from rmbench.suite.progress import column
 from rmbench.tasks import get_task
 
 POLICY_TABLE = ("mem0", "mem0:no_memory", "dp", "act")
-# the camera table's columns: the policies and the ablations that test memory (the state
-# table's no_anchor and no_sliding, which split the executor's memory in two, are left out)
-PIXEL_TABLE = ("mem0", "mem0:no_memory", "mem0:no_key", "mem0:gt_classifier",
-               "mem0:no_memory+no_key", "dp", "act")
 ABLATION_TABLE = ("mem0", "mem0:no_anchor", "mem0:no_sliding", "mem0:no_memory", "mem0:no_key",
                   "mem0:gt_classifier", "mem0:no_memory+no_key")
 
