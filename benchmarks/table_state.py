@@ -131,6 +131,11 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
             new = {"conditions": stated,
                    **cell_record(row, task),
                    "dataset": dataset, "command": run["command"]}
+            if "seeds" in new:  # a column of several training seeds: each seed's record
+                # keeps what one recorded with --seed keeps (the walls' conditions are each
+                # seed's: the stage they describe ran once per seed)
+                new["seeds"] = {s: {"conditions": stated, **r, "dataset": dataset,
+                                    "command": run["command"]} for s, r in new["seeds"].items()}
             ran = [s for s in (run.get("plan") or {}).get("policies", [])
                    if split_seed(s)[0] == spec]
             if seed is None and "policies" in (run.get("plan") or {}) and spec not in ran:

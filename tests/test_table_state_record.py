@@ -46,6 +46,22 @@ def test_a_cell_of_other_data_moves_to_superseded(table_state):
     assert doc["superseded"] == [{"why": "format 1", "cells": {"press_button": {"mem0": {"successes": 2}}}}]
 
 
+def test_a_column_of_two_seeds_keeps_each_seeds_conditions(table_state):
+    """A table trained with --train-seeds 0,1 is recorded in one call: each seed's record
+    keeps its walls' conditions, data and command, as one recorded with --seed does."""
+    run = {**_run(), "plan": {"obs": "state", "policies": ["mem0", "mem0@1"]},
+           "cells": {"press_button": {"mem0": {"successes": 60, "seeds": {
+               "0": {"successes": 36}, "1": {"successes": 24}}}}}}
+    doc = table_state.record(_doc(), run, ["press_button"], ["mem0"], "rmbench/2", "format 1",
+                             "t", conditions={"machine": "cpu", "threads": 1})
+    cell = doc["cells"]["press_button"]["mem0"]
+    for seed, k in (("0", 36), ("1", 24)):
+        r = cell["seeds"][seed]
+        assert r["successes"] == k and r["conditions"] == cell["conditions"]
+        assert r["conditions"]["train"][0]["machine"] == "cpu"
+        assert (r["dataset"], r["command"]) == ("rmbench/2", "rmbench table ...")
+
+
 def test_a_cell_of_the_same_data_is_replaced_without_a_copy(table_state):
     doc = table_state.record(_doc(), _run(), ["press_button"], ["mem0"], "rmbench/2", "format 1", "t")
     doc = table_state.record(doc, _run(40), ["press_button"], ["mem0"], "rmbench/2", "format 1", "t")
