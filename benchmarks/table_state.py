@@ -128,14 +128,13 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                 stated = stated_conditions(spec, stages, train_pieces, **said)
             except ValueError as err:
                 raise SystemExit(str(err)) from None
-            new = {"conditions": stated,
-                   **cell_record(row, task),
-                   "dataset": dataset, "command": run["command"]}
+            def kept(r: dict, stated=stated) -> dict:
+                return {"conditions": stated, **r, "dataset": dataset, "command": run["command"]}
+
+            new = kept(cell_record(row, task))
             if "seeds" in new:  # a column of several training seeds: each seed's record
-                # keeps what one recorded with --seed keeps (the walls' conditions are each
-                # seed's: the stage they describe ran once per seed)
-                new["seeds"] = {s: {"conditions": stated, **r, "dataset": dataset,
-                                    "command": run["command"]} for s, r in new["seeds"].items()}
+                # keeps what one recorded with --seed keeps (each seed's stages ran apart)
+                new["seeds"] = {s: kept(r) for s, r in new["seeds"].items()}
             ran = [s for s in (run.get("plan") or {}).get("policies", [])
                    if split_seed(s)[0] == spec]
             if seed is None and "policies" in (run.get("plan") or {}) and spec not in ran:
