@@ -26,6 +26,16 @@ pooled cell is replaced only seed by seed, never by a cell of one seed.
     python benchmarks/table_state.py --table runs/table_state --tasks press_button \\
         --specs mem0 --seed 1 --dataset rmbench/2
 
+``--rerun`` records the source's cells as the recorded seed (``--seed``, else 0) trained
+again, on another machine or software: kept under ``reruns`` beside the cell, neither
+replacing nor pooling into it. Training is bit for bit on one machine, not across CPUs
+(their vector units order the sums differently), so a re-run elsewhere measures how far the
+machine alone moves a cell. Recording one again (the same task, column, seed and command)
+replaces it.
+
+    python benchmarks/table_state.py --table runs/rerun --tasks cover_blocks --specs mem0 \
+        --rerun --dataset rmbench/2 --machine cpu --threads 1 --workers 1
+
 The camera table's file is made by its first record: the table's command, the run's plan
 and chance levels, and no cells yet.
 
@@ -79,6 +89,15 @@ def new_table(run: dict) -> dict:
             "source": "recorded from the cells' table.json by benchmarks/table_state.py"}
 
 
+def _said(conditions: dict | None) -> tuple[dict, dict]:
+    """The conditions stated for every stage, and what one stage's wall alone needs said
+    (``train_note``, ``train_beside``, ``eval_note``, ``eval_beside``)."""
+    said = dict(conditions or {})
+    stages = {stage: {"note": said.pop(f"{stage}_note", None),
+                      "beside": said.pop(f"{stage}_beside", None)} for stage in ("train", "eval")}
+    return said, stages
+
+
 def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:
     """The recorded cell ``old`` with ``new`` as its training seed ``seed``: every seed's
     record under ``seeds``, the cell their pool. Each seed keeps its own command; seeds of
@@ -114,10 +133,7 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
     cells replaced were another recipe's, kept under ``superseded`` whatever their data and
     task version; ``train_pieces``: the training's pieces (``stated_conditions``), for a
     training run on several machines."""
-    said = dict(conditions or {})
-    # what one stage's wall alone needs said
-    stages = {stage: {"note": said.pop(f"{stage}_note", None),
-                      "beside": said.pop(f"{stage}_beside", None)} for stage in ("train", "eval")}
+    said, stages = _said(conditions)
     replaced: dict[str, dict] = {}
     for task in tasks:
         for spec in specs:
@@ -180,6 +196,39 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
     return doc
 
 
+def add_rerun(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: str,
+              table: str, seed: int, conditions: dict | None = None) -> dict:
+    """``doc`` with ``run``'s cells of ``tasks`` x ``specs`` under ``reruns``, each as the
+    recorded cell's training seed ``seed`` trained again; the recorded cells unchanged."""
+    said, stages = _said(conditions)
+    reruns = doc.setdefault("reruns", [])
+    for task in tasks:
+        for spec in specs:
+            row = run["cells"].get(task, {}).get(spec)
+            if row is None:
+                raise SystemExit(f"{table}: {task} {spec} is not evaluated yet")
+            if "seeds" in row:
+                raise SystemExit(f"{table}: its {task} {spec} cell pools seeds "
+                                 f"{sorted(row['seeds'])}; a re-run is one seed")
+            old = doc["cells"].get(task, {}).get(spec)
+            if old is None or str(seed) not in seed_records(old):
+                raise SystemExit(f"{task} {spec}: no recorded seed {seed} to re-run")
+            try:
+                stated = stated_conditions(spec, stages, None, **said)
+            except ValueError as err:
+                raise SystemExit(str(err)) from None
+            new = {"task": task, "column": spec, "seed": seed, "conditions": stated,
+                   **cell_record(row, task), "dataset": dataset, "command": run["command"]}
+            (ours, our_id), (theirs, their_id) = (measured_on(task, spec, new),
+                                                  measured_on(task, spec, old))
+            if (ours, our_id) != (theirs, their_id):
+                raise SystemExit(f"{task} {spec}: the re-run trained on {ours} ({our_id}), "
+                                 f"the recorded cell on {theirs} ({their_id})")
+            reruns[:] = [r for r in reruns if (r["task"], r["column"], r["seed"], r["command"])
+                         != (task, spec, seed, new["command"])] + [new]
+    return doc
+
+
 def _train_piece(text: str) -> dict:
     """``--train-piece``'s value: a JSON object (its fields are checked when it is recorded)."""
     try:
@@ -206,6 +255,9 @@ def main(argv: list[str] | None = None) -> int:
                         "those move to superseded under --why")
     p.add_argument("--seed", type=int, help="the cells are this training seed of the recorded "
                                              "ones: pool them")
+    p.add_argument("--rerun", action="store_true",
+                   help="the cells are the recorded seed (--seed, else 0) trained again, on "
+                        "another machine: kept under reruns, the recorded cells unchanged")
     p.add_argument("--obs", choices=("state", "pixels"), default="state",
                    help="the table the cells belong to (default state)")
     p.add_argument("--out", type=Path, help="the results file (default "
@@ -238,6 +290,9 @@ def main(argv: list[str] | None = None) -> int:
     args.out = args.out or RESULTS / f"table_{args.obs}.json"
     if args.seed is not None and args.seed < 0:
         raise SystemExit(f"--seed {args.seed}: a training seed is 0 or more")
+    if args.rerun and (args.why or args.recipe_changed or args.train_piece or args.data_note):
+        raise SystemExit("--rerun replaces nothing and keeps no data walls: without "
+                         "--why, --recipe-changed, --train-piece and --data-note")
     if args.evaluation and "," in args.specs:
         raise SystemExit("--evaluation records one column: give one --specs")
     try:
@@ -269,12 +324,18 @@ def main(argv: list[str] | None = None) -> int:
                          "one spec at a time")
     for piece in args.train_piece or []:
         check_machine(piece.get("machine"), "--train-piece")
+    said_now = {k: getattr(args, k) for k in (
+        "machine", "jobs_beside", "beside", "threads", "workers", "note",
+        "train_note", "eval_note", "train_beside", "eval_beside")}
+    if args.rerun:
+        doc = add_rerun(doc, run, args.tasks.split(","), args.specs.split(","), args.dataset,
+                        args.table or args.evaluation, args.seed or 0, said_now)
+        write_json(args.out, doc)
+        print(f"wrote {args.out}")
+        return 0
     doc = record(doc, run, args.tasks.split(","),
                  args.specs.split(","), args.dataset, args.why, args.table or args.evaluation,
-                 args.seed, {k: getattr(args, k) for k in (
-                     "machine", "jobs_beside", "beside", "threads", "workers", "note",
-                     "train_note", "eval_note", "train_beside", "eval_beside")},
-                 args.recipe_changed, args.train_piece)
+                 args.seed, said_now, args.recipe_changed, args.train_piece)
     if args.data_note:
         for task in args.tasks.split(","):
             if task not in doc.get("data_walls", {}):

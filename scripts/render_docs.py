@@ -583,6 +583,29 @@ def state_seeds() -> str:
     return table + _footnote(table)
 
 
+def state_reruns() -> str:
+    """Recorded training seeds trained again on another machine (``reruns``): the recorded
+    run and the re-run, each with the CPU its training ran on, and their difference."""
+    res = load("table_state.json")
+    rows = []
+    for r in res.get("reruns", []):
+        first = seed_records(res["cells"][r["task"]][r["column"]])[str(r["seed"])]
+        a, b = Rate.of(first), Rate.of(r)
+        rows.append([r["task"], COLUMN[r["column"]], r["seed"],
+                     f"{rate(first)} ({_trained_on(first)})", f"{rate(r)} ({_trained_on(r)})",
+                     format_difference(*difference(b.successes, b.episodes,
+                                                   a.successes, a.episodes))])
+    if not rows:
+        return "No seed has been trained again yet.\n"
+    return markdown(["task", "column", "seed", "recorded", "trained again", "difference"], rows)
+
+
+def _trained_on(record: dict) -> str:
+    """The CPU a record's training ran on, as its record names it: 'AMD EPYC, avx2'."""
+    machines = (record.get("machines") or {}).get("train") or [{}]
+    return ", ".join(str(machines[-1][k]) for k in ("cpu", "isa") if machines[-1].get(k)) or "unrecorded"
+
+
 def state_failures() -> str:
     """The rows where Mem-0 stays below the published Mem-0: where its failed episodes end,
     by the plan's stage and how (``eval/endings.py``), per training seed whose records keep it."""
@@ -1188,7 +1211,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "observe-grasps": observe_grasps,
     "put-back-loops": put_back_loops,
     "state-ablations": state_ablations, "state-differences": state_differences,
-    "state-seeds": state_seeds, "state-failures": state_failures,
+    "state-seeds": state_seeds, "state-reruns": state_reruns, "state-failures": state_failures,
     "reference-reproductions": reference_reproductions,
     "mn-recipe": mn_recipe, "memory-probe": memory_probe,
     "state-records": state_records, "state-hardware": state_hardware,

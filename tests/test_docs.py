@@ -153,3 +153,23 @@ def test_a_task_not_measured_reads_as_missing_and_empties_its_averages():
     assert rows["swap_T"] == rows["press_button"] == ["—", "—"]
     assert rows["**average M(1)**"] == rows["**average M(n)**"] == ["—", "—"]
     assert rows["**average (all)**"] == ["—", "—"]
+
+
+def test_a_rerun_is_set_beside_the_seed_it_repeats_with_each_cpu(monkeypatch):
+    """A seed trained again elsewhere reads as the recorded seed and the re-run, each with the
+    CPU its training ran on, and the re-run minus the recorded in points."""
+    docs = _render_docs()
+
+    def run(k, isa):
+        return {"successes": k, "episodes": 100,
+                "machines": {"train": [{"cpu": "AMD EPYC", "isa": isa}]}}
+
+    res = {"cells": {"cover_blocks": {"mem0": {"successes": 51, "episodes": 200, "seeds": {
+        "0": run(28, "avx512f"), "1": run(23, "avx512f")}}}},
+        "reruns": [{"task": "cover_blocks", "column": "mem0", "seed": 0, **run(36, "avx2")}]}
+    monkeypatch.setattr(docs, "load", lambda name: res)
+    assert docs.state_reruns().splitlines()[2] == (
+        "| cover_blocks | Mem-0 | 0 | 28 [20, 37] (AMD EPYC, avx512f) | "
+        "36 [27, 46] (AMD EPYC, avx2) | +8 [-5, +21] |")
+    res["reruns"] = []
+    assert docs.state_reruns() == "No seed has been trained again yet.\n"

@@ -394,3 +394,12 @@ def test_a_checkpoint_spelled_another_way_resumes_its_evaluation(tmp_path, monke
     check_identity(out, cfg(out, policy=f"mem0:{tmp_path}/link/ckpt").identity())
     with pytest.raises(EvalError, match="other arguments"):
         check_identity(out, cfg(out, policy="mem0:runs/ckpt?ablation=no_key").identity())
+
+
+def test_a_rate_reads_its_count_and_falls_back_to_the_rate_alone():
+    """A row with a count needs no rate beside it; an older row without one has it back from
+    its rate and episodes."""
+    from rmbench.eval.report import Rate
+
+    assert (Rate.of({"successes": 36, "episodes": 100}).successes,
+            Rate.of({"success_rate": 0.36, "episodes": 100}).successes) == (36, 36)

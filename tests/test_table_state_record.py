@@ -408,3 +408,35 @@ def test_a_training_piece_on_the_command_line_is_a_json_object(table_state, tmp_
     assert table_state._train_piece('{"steps": [0, 10]}') == {"steps": [0, 10]}
     with pytest.raises(Exception, match="not JSON"):
         table_state._train_piece("{steps: [0, 10]}")
+
+
+def test_a_rerun_is_kept_beside_the_seed_it_repeats_and_changes_no_cell(table_state):
+    """The recorded seed trained again on another machine: kept under reruns, the cell and
+    its pool untouched; recording it again replaces it; a seed not recorded, other data or
+    a pooled row is refused."""
+    cell = {"successes": 51, "episodes": 200, "dataset": "rmbench/2", "command": "c0",
+            "seeds": {"0": {**_seed_row(28), "dataset": "rmbench/2"},
+                      "1": {**_seed_row(23), "dataset": "rmbench/2"}}}
+    doc = {"cells": {"press_button": {"mem0": cell}}, "chance": {}, "superseded": []}
+    run = {"command": "rmbench table ... --out elsewhere", "plan": {"policies": ["mem0"]},
+           "cells": {"press_button": {"mem0": _seed_row(36)}}}
+    doc = table_state.add_rerun(doc, run, ["press_button"], ["mem0"], "rmbench/2", "t", 0,
+                                {"machine": "cpu", "train_beside": "another training"})
+    assert doc["cells"]["press_button"]["mem0"] == cell and doc["superseded"] == []
+    (rerun,) = doc["reruns"]
+    assert (rerun["task"], rerun["column"], rerun["seed"], rerun["successes"]) == (
+        "press_button", "mem0", 0, 36)
+    assert rerun["conditions"]["train"][0]["beside"] == "another training"
+    run["cells"]["press_button"]["mem0"] = _seed_row(37)
+    doc = table_state.add_rerun(doc, run, ["press_button"], ["mem0"], "rmbench/2", "t", 0)
+    assert [r["successes"] for r in doc["reruns"]] == [37]
+    with pytest.raises(SystemExit, match="no recorded seed 2 to re-run"):
+        table_state.add_rerun(doc, run, ["press_button"], ["mem0"], "rmbench/2", "t", 2)
+    with pytest.raises(SystemExit, match="the re-run trained on rmbench/1"):
+        table_state.add_rerun(doc, run, ["press_button"], ["mem0"], "rmbench/1", "t", 0)
+    run["cells"]["press_button"]["mem0"] = {**_seed_row(36), "seeds": {"0": {}, "1": {}}}
+    with pytest.raises(SystemExit, match="a re-run is one seed"):
+        table_state.add_rerun(doc, run, ["press_button"], ["mem0"], "rmbench/2", "t", 0)
+    with pytest.raises(SystemExit, match="--rerun replaces nothing"):
+        table_state.main(["--table", "t", "--tasks", "press_button", "--specs", "mem0",
+                          "--dataset", "rmbench/2", "--rerun", "--why", "x"])

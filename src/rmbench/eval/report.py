@@ -52,7 +52,9 @@ class Rate(float):
         n = row.get("episodes")
         if not n:
             return 100 * row["success_rate"]
-        return cls(row.get("successes", round(row["success_rate"] * n)), n)
+        # the count where the row has one (a default argument would read the rate regardless)
+        k = row["successes"] if "successes" in row else round(row["success_rate"] * n)
+        return cls(k, n)
 
     @property
     def ci95(self) -> tuple[float, float]:
