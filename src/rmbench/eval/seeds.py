@@ -6,6 +6,11 @@ job as the evaluation (so on the evaluation's workers). Results are taken in can
 so the list is the first N solved seeds whatever the worker count. The list is cached per
 task, gym id (its version), evaluation seed and split and saved after every candidate, so re-runs and
 interrupted searches skip what is known; a longer list extends the cached one.
+
+rmbench ships the benchmark's lists (evaluation seed 0, both splits: ``SHIPPED``, made by
+``scripts/ship_seed_lists.py``), so the default cache starts from them and a new machine
+evaluates at once. A cache folder given explicitly starts empty: it verifies every seed on
+the machine it runs on.
 """
 
 from __future__ import annotations
@@ -26,6 +31,9 @@ from rmbench.tasks import get_task
 log = logging.getLogger(__name__)
 
 
+SHIPPED = Path(__file__).with_name("verified_seeds")  # lists verified once, in the cache's format
+
+
 def cache_dir() -> Path:
     return Path(os.environ.get("RMBENCH_CACHE", Path.home() / ".cache" / "rmbench")) / "seeds"
 
@@ -39,18 +47,22 @@ def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = Non
     # (the test split's file keeps the name it had before there were splits)
     name = f"{cls.gym_id.replace('/', '_')}-seed{seed}" + ("" if split == "test" else f"-{split}")
     path = Path(cache or cache_dir()) / f"{name}.json"
-    state = _cached(path, cls, seed)
+    shipped = cache is None
+    state = _cached(path, cls, seed, shipped)
     if len(state["verified"]) >= episodes:
         return state["verified"][:episodes]
     # one search at a time (a table starts a task's evaluations together); the one that
     # waited reads what the other found
     with lock(path.with_name(path.name + ".lock"), wait=True):
-        return _search(cls, _cached(path, cls, seed), path, start, episodes, executor, progress)
+        return _search(cls, _cached(path, cls, seed, shipped), path, start, episodes, executor, progress)
 
 
-def _cached(path: Path, cls, seed: int) -> dict:
-    """The seed cache at ``path``, or an empty one (where it is missing or not a cache)."""
+def _cached(path: Path, cls, seed: int, shipped: bool = False) -> dict:
+    """The seed cache at ``path``, or (with ``shipped``, where there is none yet) the list
+    rmbench ships under its name, or an empty one (where neither is a cache)."""
     cached = read_json_or(path, None)
+    if cached is None and shipped:
+        cached = read_json_or(SHIPPED / path.name, None)
     if cached is not None and isinstance(cached.get("verified"), list) and isinstance(
             cached.get("rejected"), list):
         return cached

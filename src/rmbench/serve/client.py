@@ -74,8 +74,10 @@ class RemotePolicy(BasePolicy):
         except OSError as err:  # (refused, no such host): the address said with the reason
             raise PolicyUnavailable(f"{self.url}: {err.strerror or err}") from None
         # (something else answers there; a peer that closes mid-handshake, such as a banner
-        # and a close, reads as a closed connection or as a bad handshake depending on timing)
-        except (InvalidHandshake, InvalidURI, ConnectionClosed) as err:
+        # and a close, reads as a closed connection or as a bad handshake depending on timing,
+        # and on a loaded machine as the websockets sync client's own AssertionError: its
+        # reader thread saw the broken pipe while the handshake was still writing)
+        except (InvalidHandshake, InvalidURI, ConnectionClosed, AssertionError) as err:
             raise PolicyUnavailable(f"{self.url} is not a websocket server: {err}") from None
         try:
             metadata = unpack(self.ws.recv(timeout=self.timeout), REPLY)
