@@ -29,8 +29,8 @@ pooled cell is replaced only seed by seed, never by a cell of one seed.
 ``--rerun`` records the source's cells as the recorded seed (``--seed``, else 0) trained
 again, on another machine or software: kept under ``reruns`` beside the cell, neither
 replacing nor pooling into it. Training is bit for bit on one machine, not across CPUs
-(their vector units order the sums differently), so a re-run elsewhere measures how far the
-machine alone moves a cell. Recording one again (the same task, column, seed and command)
+(torch's float kernels for AVX-512 and AVX2 round differently), so a re-run elsewhere
+measures how far the machine alone moves a cell. Recording one again (the same task, column, seed and command)
 replaces it.
 
     python benchmarks/table_state.py --table runs/rerun --tasks cover_blocks --specs mem0 \
@@ -98,6 +98,15 @@ def _said(conditions: dict | None) -> tuple[dict, dict]:
     return said, stages
 
 
+def _same_measure(task: str, column: str, new: dict, old: dict, what: str) -> None:
+    """A SystemExit unless ``new`` (``what``, in words) was measured on ``old``'s dataset
+    format and task version: only then do they pool or stand side by side."""
+    (ours, our_id), (theirs, their_id) = measured_on(task, column, new), measured_on(task, column, old)
+    if (ours, our_id) != (theirs, their_id):
+        raise SystemExit(f"{task} {column}: {what} trained on {ours} ({our_id}), the "
+                         f"recorded cell on {theirs} ({their_id})")
+
+
 def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:
     """The recorded cell ``old`` with ``new`` as its training seed ``seed``: every seed's
     record under ``seeds``, the cell their pool. Each seed keeps its own command; seeds of
@@ -107,10 +116,7 @@ def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> 
     if "seeds" in new:
         raise SystemExit(f"{task} {column}: the new cell pools seeds {sorted(new['seeds'])}; "
                          f"record one seed")
-    (ours, our_id), (theirs, their_id) = measured_on(task, column, new), measured_on(task, column, old)
-    if (ours, our_id) != (theirs, their_id):
-        raise SystemExit(f"{task} {column}: seed {seed} trained on {ours} ({our_id}), the "
-                         f"recorded cell on {theirs} ({their_id})")
+    _same_measure(task, column, new, old, f"seed {seed}")
     seeds = {int(s): r for s, r in seed_records(old).items()}
     seeds[seed] = new
     if len(seeds) == 1:  # seed 0 of a cell of one seed: the cell itself
@@ -219,11 +225,7 @@ def add_rerun(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset:
                 raise SystemExit(str(err)) from None
             new = {"task": task, "column": spec, "seed": seed, "conditions": stated,
                    **cell_record(row, task), "dataset": dataset, "command": run["command"]}
-            (ours, our_id), (theirs, their_id) = (measured_on(task, spec, new),
-                                                  measured_on(task, spec, old))
-            if (ours, our_id) != (theirs, their_id):
-                raise SystemExit(f"{task} {spec}: the re-run trained on {ours} ({our_id}), "
-                                 f"the recorded cell on {theirs} ({their_id})")
+            _same_measure(task, spec, new, old, "the re-run")
             reruns[:] = [r for r in reruns if (r["task"], r["column"], r["seed"], r["command"])
                          != (task, spec, seed, new["command"])] + [new]
     return doc

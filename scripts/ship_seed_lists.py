@@ -15,21 +15,19 @@ import argparse
 import time
 from pathlib import Path
 
-from rmbench.eval.seeds import SHIPPED, verified_seeds
+from rmbench.eval.seeds import SHIPPED, list_name, verified_seeds
 from rmbench.eval.worker import close_worker
 from rmbench.files import read_json_or, write_json
 from rmbench.machine import describe
 from rmbench.parallel import make_executor
-from rmbench.tasks import TASKS, get_task
+from rmbench.tasks import TASKS
 from rmbench.tasks.registry import ordered
 
 RESULT = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "seed_verification.json"
 
 
 def _complete(task: str, split: str, episodes: int) -> bool:
-    cls = get_task(task)
-    name = f"{cls.gym_id.replace('/', '_')}-seed0" + ("" if split == "test" else f"-{split}")
-    cached = read_json_or(SHIPPED / f"{name}.json", None) or {}
+    cached = read_json_or(SHIPPED / list_name(task, 0, split), None) or {}
     return len(cached.get("verified", [])) >= episodes
 
 

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from rmbench.eval import seeds
-from rmbench.eval.seeds import SHIPPED, verified_seeds
+from rmbench.eval.seeds import SHIPPED, list_name, verified_seeds
 from rmbench.seeds import SPLIT_STRIDE, eval_seed_start
 from rmbench.tasks import get_task
 from rmbench.tasks.registry import ordered
@@ -28,7 +28,7 @@ def test_every_shipped_list_is_a_current_task_versions_first_solved_seeds():
         doc = json.loads(path.read_text())
         cls = get_task(doc["task"])
         assert doc["gym_id"] == cls.gym_id in current, path.name
-        assert path.name.startswith(cls.gym_id.replace("/", "_") + "-seed0"), path.name
+        assert path.name == list_name(cls.name, doc["seed"], _split(path)), path.name
         start = eval_seed_start(doc["seed"], _split(path))
         tried = sorted(doc["verified"] + [r["seed"] for r in doc["rejected"]])
         # the first candidates of the split, each tried once, none left out
@@ -41,7 +41,7 @@ def test_the_default_cache_starts_from_the_shipped_list_and_a_given_one_verifies
     shipped = tmp_path / "shipped"
     shipped.mkdir()
     cls = get_task("put_back_block")
-    name = f"{cls.gym_id.replace('/', '_')}-seed0.json"
+    name = list_name(cls.name, 0)
     # a list no expert run made: taken as it is from the default cache, never from a given one
     fake = {"task": cls.name, "gym_id": cls.gym_id, "seed": 0,
             "verified": [100000, 100002], "rejected": [{"seed": 100001, "reason": "x"}]}

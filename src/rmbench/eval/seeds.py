@@ -38,15 +38,20 @@ def cache_dir() -> Path:
     return Path(os.environ.get("RMBENCH_CACHE", Path.home() / ".cache" / "rmbench")) / "seeds"
 
 
+def list_name(task: str, seed: int, split: str = "test") -> str:
+    """The file a task version's seed list is kept in, in a cache and in ``SHIPPED``."""
+    # (the test split's file keeps the name it had before there were splits)
+    suffix = "" if split == "test" else f"-{split}"
+    return f"{get_task(task).gym_id.replace('/', '_')}-seed{seed}{suffix}.json"
+
+
 def verified_seeds(task: str, seed: int, episodes: int, cache: Path | None = None,
                    executor=None, progress: bool = False, split: str = "test") -> list[int]:
     """The first ``episodes`` seeds of evaluation seed ``seed``'s ``split`` that the expert
     solves."""
     cls = get_task(task)
     start = eval_seed_start(seed, split)
-    # (the test split's file keeps the name it had before there were splits)
-    name = f"{cls.gym_id.replace('/', '_')}-seed{seed}" + ("" if split == "test" else f"-{split}")
-    path = Path(cache or cache_dir()) / f"{name}.json"
+    path = Path(cache or cache_dir()) / list_name(task, seed, split)
     shipped = cache is None
     state = _cached(path, cls, seed, shipped)
     if len(state["verified"]) >= episodes:
