@@ -42,6 +42,30 @@ def test_inverse_stays_within_the_joint_limits():
     assert np.all(q >= kin.low["left"]) and np.all(q <= kin.high["left"])
 
 
+def test_both_arms_in_one_pass_give_each_arms_own_numbers():
+    """``forward_arms`` (what a training's pose statistics read over every frame) gives
+    ``forward``'s bytes, arm by arm, whatever the other arm does; so does ``from_joints``."""
+    kin, rng = GraspKinematics(), np.random.default_rng(2)
+    q = rng.uniform(-1.0, 1.0, (40, len(robot.SIDES), 6))
+    pos, mat = kin.forward_arms(q)
+    assert pos.shape == (40, 2, 3) and mat.shape == (40, 2, 3, 3)
+    for t in range(len(q)):
+        for k, side in enumerate(robot.SIDES):
+            p1, m1 = kin.forward(side, q[t, k])
+            np.testing.assert_array_equal(pos[t, k], p1)
+            np.testing.assert_array_equal(mat[t, k], m1)
+    joints = np.concatenate([q[:, 0], rng.uniform(0, 1, (40, 1)), q[:, 1],
+                             rng.uniform(0, 1, (40, 1))], 1)
+    poses = EEActions().from_joints(joints)
+    for k, side in enumerate(robot.SIDES):
+        p1, m1 = kin.forward(side, joints[7, 7 * k: 7 * k + 6])
+        np.testing.assert_array_equal(poses[7, 10 * k: 10 * k + 3], p1.astype(np.float32))
+        np.testing.assert_array_equal(poses[7, 10 * k + 3: 10 * k + 9],
+                                      m1[:, :2].T.reshape(6).astype(np.float32))
+    with pytest.raises(ValueError, match=r"forward_arms reads joints \(T, 2, 6\)"):
+        kin.forward_arms(np.zeros((3, 12)))
+
+
 def test_rotation_from_6d_is_a_rotation_and_keeps_a_rotation():
     rng = np.random.default_rng(1)
     r = rotation_from_6d(rng.normal(size=6))

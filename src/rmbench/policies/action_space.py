@@ -46,15 +46,14 @@ class EEActions:
 
     def from_joints(self, actions: np.ndarray) -> np.ndarray:
         """Joint targets (T, 14) -> pose targets (T, 20), float32."""
-        actions = np.asarray(actions, np.float64)
+        actions = np.asarray(actions, np.float64).reshape(len(actions), len(robot.SIDES), 7)
+        pos, mat = self.kin.forward_arms(actions[:, :, :6])
         out = np.empty((len(actions), EE_DIM), np.float32)
-        for k, side in enumerate(robot.SIDES):
-            for t, a in enumerate(actions):
-                pos, mat = self.kin.forward(side, a[7 * k: 7 * k + 6])
-                o = EE_ARM * k
-                out[t, o: o + 3] = pos
-                out[t, o + 3: o + 9] = mat[:, :2].T.reshape(6)
-                out[t, o + 9] = a[7 * k + 6]
+        for k in range(len(robot.SIDES)):
+            o = EE_ARM * k
+            out[:, o: o + 3] = pos[:, k]
+            out[:, o + 3: o + 9] = mat[:, k, :, :2].transpose(0, 2, 1).reshape(-1, 6)
+            out[:, o + 9] = actions[:, k, 6]
         return out
 
     def to_joints(self, targets: np.ndarray, seed: np.ndarray) -> np.ndarray:

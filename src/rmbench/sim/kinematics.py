@@ -55,6 +55,36 @@ class GraspKinematics:
         sid = self.site[side]
         return self.data.site_xpos[sid].copy(), self.data.site_xmat[sid].reshape(3, 3).copy()
 
+    def forward_arms(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Both grasp sites' positions (T, 2, 3) and rotation matrices (T, 2, 3, 3), sides in
+        ``robot.SIDES`` order, for arm joints ``q`` (T, 2, 6): the numbers ``forward`` gives
+        side by side, from one kinematics pass per row (a site moves with its own arm's joints
+        only). Python's per-call work, not MuJoCo's, is most of ``forward``'s time: this is
+        several times faster (benchmarks/pose_stats_speed.py); a state training starts by
+        reading the poses of its every frame, layout copies included."""
+        q = np.asarray(q, np.float64)
+        if q.ndim != 3 or q.shape[1:] != (len(robot.SIDES), 6):
+            raise ValueError(f"forward_arms reads joints (T, {len(robot.SIDES)}, 6), got {q.shape}")
+        # each arm's six joints are consecutive in qpos (checked): slices, not fancy indexing,
+        # and MuJoCo's arrays read through views taken once, are most of the saving
+        starts = [int(self.qadr[s][0]) for s in robot.SIDES]
+        assert all(np.array_equal(self.qadr[s], np.arange(a, a + 6))
+                   for s, a in zip(robot.SIDES, starts, strict=True))
+        qpos = self.data.qpos
+        # one view per site, taken once: a row of a MuJoCo array, read without indexing again
+        site_pos = [self.data.site_xpos[self.site[s]] for s in robot.SIDES]
+        site_mat = [self.data.site_xmat[self.site[s]] for s in robot.SIDES]
+        pos, mat = np.empty((len(q), len(starts), 3)), np.empty((len(q), len(starts), 9))
+        model, data = self.model, self.data
+        for t in range(len(q)):
+            for k, a in enumerate(starts):
+                qpos[a: a + 6] = q[t, k]
+            mujoco.mj_kinematics(model, data)
+            for k in range(len(starts)):
+                pos[t, k] = site_pos[k]
+                mat[t, k] = site_mat[k]
+        return pos, mat.reshape(len(q), len(starts), 3, 3)
+
     def inverse(self, side: str, pos: np.ndarray, mat: np.ndarray, seed: np.ndarray,
                 iters: int = 30, tol: float = 1e-7, rot_weight: float = 0.1,
                 cutoff: float = 0.015) -> np.ndarray:
