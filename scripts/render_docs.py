@@ -351,6 +351,26 @@ def observe_grasps() -> str:
                      "median cm to the target", "median cm over the table"], rows)
 
 
+def render_size() -> str:
+    """Copies' frames rendered smaller: cost and feature distance (benchmarks/render_size.py)."""
+    path = RESULTS / "render_size.json"
+    if not path.exists():
+        return markdown(["rendered at"], [])
+    res = json.loads(path.read_text())
+    cams, rows = res["cameras"], []
+    for size, r in res["sizes"].items():
+        rows.append([size, f"{r['render_ms_per_image']:.1f}", f"{r['encode_ms_per_image']:.1f}",
+                     f"{r['render_encode_speedup']:.2f}x",
+                     *(f"{r['cameras'][c]['training_vs_closed_loop']:.3f}" for c in cams)])
+    base = next(r for r in res["sizes"].values() if "other_layout" in next(iter(r["cameras"].values())))
+    for key, label in ((f"{res['lag_steps']}_steps_later",
+                        f"(the same view {res['lag_steps']} steps later)"),
+                       ("other_layout", "(the same step of another layout)")):
+        rows.append([label, "", "", "", *(f"{base['cameras'][c][key]:.3f}" for c in cams)])
+    return markdown(["rendered at", "render (CPU ms an image)", "encode (CPU ms an image)",
+                     "speed-up", *(f"{c}: training features' distance" for c in cams)], rows)
+
+
 def put_back_loops() -> str:
     """Put-back loops in evaluation records (benchmarks/put_back_loops.py)."""
     path = RESULTS / "put_back_loops.json"
@@ -1209,7 +1229,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "pixels-validation-probes": functools.partial(validation_probes, "pixels"),
     "pixels-planner-keys": planner_keys_pixels,
     "observe-grasps": observe_grasps,
-    "put-back-loops": put_back_loops,
+    "put-back-loops": put_back_loops, "render-size": render_size,
     "state-ablations": state_ablations, "state-differences": state_differences,
     "state-seeds": state_seeds, "state-reruns": state_reruns, "state-failures": state_failures,
     "reference-reproductions": reference_reproductions,
