@@ -1171,6 +1171,21 @@ def speed() -> str:
                  f"({prep['speedup']['both']:.2f}x; resize {prep['speedup']['resize']:.2f}x); "
                  + ("the same bytes" if all(prep["identical"].values()) else "bytes differ"),
                  "`benchmarks/frame_prep.py`"])
+    poses = load("pose_stats_speed.json")
+    rows.append([f"the grasp poses a state training reads when it starts ({poses['dataset']}: "
+                 f"{poses['episodes']} demonstrations and {poses['copies_kept']} layout copies, "
+                 f"{poses['rows']:,} joint states), 1 thread: both arms in one kinematics pass "
+                 "against one arm a call",
+                 f"{poses['cpu_s']['now']:.1f} s of CPU against {poses['cpu_s']['before']:.1f} "
+                 f"({poses['speedup']:.2f}x); "
+                 + ("the same bytes" if poses["identical"] else "bytes differ"),
+                 "`benchmarks/pose_stats_speed.py`"])
+    mm = load("matmul_rate.json")
+    rows.append([f"float32 matmul, {mm['size']}x{mm['size']}, GFLOP/s by torch threads "
+                 "(the yardstick of training walls across machines)",
+                 ", ".join(f"{n} thread{'s' if n != '1' else ''}: {g}"
+                           for n, g in mm["gflops"].items()) + f" ({mm['machine']['isa']})",
+                 "`benchmarks/matmul_rate.py`"])
     return markdown(["what", "figure", "command"], rows)
 
 
