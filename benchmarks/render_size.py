@@ -32,19 +32,19 @@ from pathlib import Path
 import numpy as np
 import torch
 
+# the features and their distance exactly as codec_gap.py measures the codec's gap (run as a
+# script, this folder is on the path)
+from codec_gap import BACKBONE, LAG, SIZE, STRIDE, features, relative
+
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
-from rmbench.data.torch_dataset import resize
 from rmbench.envs.registration import make
 from rmbench.experts import make_expert
 from rmbench.files import write_json
 from rmbench.machine import describe
-from rmbench.policies.nn.backbone import backbone_features
 from rmbench.video import Mp4Encoder, decode_video
 
 ROOT = Path(__file__).resolve().parents[1]
-SIZE, STRIDE, BACKBONE = (96, 128), 16, "efficientnet_lite0"
 REFERENCE = "320x240"  # the collection's resolution: what the env renders in closed loop
-LAG = 5
 
 
 def parse(size: str) -> tuple[int, int]:
@@ -76,16 +76,6 @@ def episode(task: str, seed: int, steps: int, sizes: list[str]):
             break
     env.close()
     return {s: {c: np.stack(v) for c, v in per.items()} for s, per in frames.items()}, cpu
-
-
-def features(frames: np.ndarray) -> torch.Tensor:
-    images = torch.from_numpy(resize(frames, SIZE)).permute(0, 3, 1, 2)
-    return torch.cat([backbone_features(BACKBONE, STRIDE, images[i:i + 8])
-                      for i in range(0, len(images), 8)]).flatten(1)
-
-
-def relative(a: torch.Tensor, b: torch.Tensor) -> float:
-    return float(((a - b).norm(dim=1) / b.norm(dim=1)).mean())
 
 
 def coded(frames: np.ndarray) -> tuple[np.ndarray, float]:
