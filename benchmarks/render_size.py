@@ -26,6 +26,7 @@ does not say a policy would score the same, which only a trained cell says.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -127,9 +128,11 @@ def main() -> None:
             / (row["render_ms_per_image"] + row["encode_ms_per_image"]), 3)
     report = {"task": args.task, "seeds": args.seeds, "frames": n_frames, "cameras": cameras,
               "feature_size": list(SIZE), "backbone": BACKBONE, "stride": STRIDE,
-              "lag_steps": LAG, "threads": 1, "sizes": rows, "machine": describe()}
+              "lag_steps": LAG, "threads": 1, "gl_backend": os.environ.get("MUJOCO_GL"),
+              "sizes": rows, "machine": describe()}
     write_json(args.out, report, indent=2)
-    print(f"{args.task}, seed {args.seeds[0]} ({n_frames} frames, {len(cameras)} cameras); CPU ms "
+    print(f"{args.task}, seed {args.seeds[0]} ({n_frames} frames, {len(cameras)} cameras, "
+          f"MUJOCO_GL={report['gl_backend']}); CPU ms "
           f"a camera image, and the training features' relative distance from the closed loop's:")
     print("| rendered at | render | encode | speed-up | " + " | ".join(cameras)
           + " |\n|---|---|---|---|" + "---|" * len(cameras))
