@@ -45,6 +45,11 @@ class GraspKinematics:
         self.low = {s: np.array([m.jnt_range[j.id][0] for j in js]) for s, js in joints.items()}
         self.high = {s: np.array([m.jnt_range[j.id][1] for j in js]) for s, js in joints.items()}
         self.site = {s: m.site(f"{s}/grasp").id for s in robot.SIDES}
+        # each arm's six joints lie consecutive in qpos: forward_arms writes them as slices
+        self._arm_start = [int(self.qadr[s][0]) for s in robot.SIDES]
+        if not all(np.array_equal(self.qadr[s], np.arange(a, a + 6))
+                   for s, a in zip(robot.SIDES, self._arm_start, strict=True)):
+            raise ValueError("the robot model's arm joints are not consecutive in qpos")
         self._jacp = np.zeros((3, m.nv))
         self._jacr = np.zeros((3, m.nv))
 
@@ -65,12 +70,9 @@ class GraspKinematics:
         q = np.asarray(q, np.float64)
         if q.ndim != 3 or q.shape[1:] != (len(robot.SIDES), 6):
             raise ValueError(f"forward_arms reads joints (T, {len(robot.SIDES)}, 6), got {q.shape}")
-        # each arm's six joints are consecutive in qpos (checked): slices, not fancy indexing,
-        # and MuJoCo's arrays read through views taken once, are most of the saving
-        starts = [int(self.qadr[s][0]) for s in robot.SIDES]
-        assert all(np.array_equal(self.qadr[s], np.arange(a, a + 6))
-                   for s, a in zip(robot.SIDES, starts, strict=True))
-        qpos = self.data.qpos
+        # slices, not fancy indexing, and MuJoCo's arrays read through views taken once, are
+        # most of the saving
+        starts, qpos = self._arm_start, self.data.qpos
         # one view per site, taken once: a row of a MuJoCo array, read without indexing again
         site_pos = [self.data.site_xpos[self.site[s]] for s in robot.SIDES]
         site_mat = [self.data.site_xmat[self.site[s]] for s in robot.SIDES]
