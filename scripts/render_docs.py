@@ -362,11 +362,10 @@ def render_size() -> str:
         rows.append([size, f"{r['render_ms_per_image']:.1f}", f"{r['encode_ms_per_image']:.1f}",
                      f"{r['render_encode_speedup']:.2f}x",
                      *(f"{r['cameras'][c]['training_vs_closed_loop']:.3f}" for c in cams)])
-    base = next(r for r in res["sizes"].values() if "other_layout" in next(iter(r["cameras"].values())))
     for key, label in ((f"{res['lag_steps']}_steps_later",
                         f"(the same view {res['lag_steps']} steps later)"),
                        ("other_layout", "(the same step of another layout)")):
-        rows.append([label, "", "", "", *(f"{base['cameras'][c][key]:.3f}" for c in cams)])
+        rows.append([label, "", "", "", *(f"{res['apart'][c][key]:.3f}" for c in cams)])
     return markdown(["rendered at", "render (CPU ms an image)", "encode (CPU ms an image)",
                      "speed-up", *(f"{c}: training features' distance" for c in cams)], rows)
 
