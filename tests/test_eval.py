@@ -99,6 +99,32 @@ def test_policy_errors_are_recorded_and_the_evaluation_goes_on(tmp_path):
     assert summary["tasks"][TASK]["endings"]["policy_error"] == 3
 
 
+class Untypable(BasePolicy):
+    """A complex action, or a status JSON has no value for: each an error of the policy's."""
+
+    def __init__(self, kind):
+        self.kind = kind
+
+    def act(self, observation):
+        return np.full(14, 0.1 + 1j) if self.kind == "complex" else observation["agent_pos"]
+
+    def status(self):
+        return {"subtask": {"a", "b"}} if self.kind == "set" else {}
+
+
+register_policy("test_untypable", "a complex action (complex) or a set in its status (set)",
+                needs_argument=True, cameras=())(lambda arg, env: Untypable(arg))
+
+
+@pytest.mark.parametrize("kind, message", [("complex", "real numbers, got dtype complex128"),
+                                           ("set", "TypeError: set is not a JSON value")])
+def test_an_answer_json_or_the_arms_cannot_take_is_the_policy_s_error(tmp_path, kind, message):
+    summary = evaluate(cfg(tmp_path, policy=f"test_untypable:{kind}", episodes=1))
+    (rec,) = records(tmp_path)  # recorded, so a resume goes on past it
+    assert rec["reason"] == "policy_error" and message in rec["message"] and rec["steps"] == 0
+    assert summary["tasks"][TASK]["endings"]["policy_error"] == 1
+
+
 def test_resume_keeps_complete_records_and_drops_a_torn_one(tmp_path):
     evaluate(cfg(tmp_path, policy="random"))
     path = tmp_path / "out" / TASK / "episodes.jsonl"
@@ -355,6 +381,15 @@ def test_a_damaged_record_mid_file_is_an_error_that_loses_nothing(tmp_path):
         with pytest.raises(EvalError, match="line 2 is not an episode record"):
             evaluate(cfg(tmp_path, policy="random"))
         assert path.read_text() == damaged  # neither the reader nor the resume cut it
+    # a record of the wrong types: a seed as text would be played and recorded again
+    first = json.loads(lines[0])
+    for key, value, what in (("seed", str(first["seed"]), "an integer"),
+                             ("success", None, "true or false"), ("progress", True, "a number")):
+        damaged = json.dumps({**first, key: value}) + "\n" + "".join(lines[1:])
+        path.write_text(damaged)
+        with pytest.raises(EvalError, match=f"line 1: its {key} is .*, not {what}"):
+            evaluate(cfg(tmp_path, policy="random"))
+        assert path.read_text() == damaged
     # a torn last line is left out by a reader, and cut only by the evaluation that appends
     path.write_text("".join(lines) + lines[0][:20])
     assert len(records(tmp_path)) == 3 and path.read_text().endswith(lines[0][:20])

@@ -52,6 +52,32 @@ def test_a_lock_refuses_a_second_holder_or_waits_for_it(tmp_path):
     got[0].close()
 
 
+def test_a_lock_whose_holder_removed_its_file_is_taken_on_the_new_file(tmp_path, monkeypatch):
+    import fcntl
+
+    from rmbench import files
+
+    path = tmp_path / "x.lock"
+    real, calls = fcntl.flock, []
+
+    def holder_removes_it_first(f, op):
+        # the holder removes the file and lets it go between this process's open and its lock
+        # (a finished evaluation does): the lock then falls on a file no one else can open
+        calls.append(op)
+        if len(calls) == 1:
+            path.unlink()
+        return real(f, op)
+
+    monkeypatch.setattr(files.fcntl, "flock", holder_removes_it_first)
+    held = files.lock(path)
+    assert len(calls) == 2  # the removed file let go, the one now at the path locked
+    assert os.fstat(held.fileno()).st_ino == os.stat(path).st_ino
+    monkeypatch.setattr(files.fcntl, "flock", real)
+    with pytest.raises(files.Locked):
+        files.lock(path)  # a newcomer finds it held
+    held.close()
+
+
 def test_a_stage_record_that_is_not_an_object_reads_as_absent(tmp_path):
     from rmbench.files import read_json_or
 

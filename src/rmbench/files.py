@@ -34,22 +34,39 @@ def lock(path: str | Path, wait: bool = False) -> IO[str]:
     another process holds it, or with ``wait`` once that process lets it go."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    f: IO[str] = open(path, "a+")
-    try:
-        fcntl.flock(f, fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        f.seek(0)
-        holder = f.read().strip()
+    while True:
+        f: IO[str] = open(path, "a+")
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            holder = f.read().strip()
+            f.close()
+            raise Locked(path, holder) from None
+        except OSError as err:  # a file system without locks (some network mounts): unlocked
+            logging.getLogger(__name__).warning("%s: not locked, the file system takes no "
+                                                "locks (%s)", path, err.strerror or err)
+            break
+        if _same_file(f, path):
+            break
+        # its holder removed the file before letting it go (a finished evaluation does): the
+        # lock is on a file no other process can open, so take the one now at the path
         f.close()
-        raise Locked(path, holder) from None
-    except OSError as err:  # a file system without locks (some network mounts): go on unlocked
-        logging.getLogger(__name__).warning("%s: not locked, the file system takes no locks "
-                                            "(%s)", path, err.strerror or err)
     f.seek(0)
     f.truncate()
     f.write(f"{os.getpid()}\n")
     f.flush()
     return f
+
+
+def _same_file(f: IO[str], path: Path) -> bool:
+    """Is the open file ``f`` still the one at ``path``?"""
+    try:
+        here = os.stat(path)
+    except FileNotFoundError:
+        return False
+    mine = os.fstat(f.fileno())
+    return (mine.st_dev, mine.st_ino) == (here.st_dev, here.st_ino)
 
 
 @contextmanager

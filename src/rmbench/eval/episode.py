@@ -34,7 +34,10 @@ ENDINGS = ("success", "task_failure", "timeout", "policy_error", "sim_error")
 
 def as_chunk(out) -> np.ndarray:
     """A policy's answer as a (k, 14) float64 chunk, or ValueError saying what is wrong."""
-    a = np.asarray(out, dtype=np.float64)
+    a = np.asarray(out)
+    if a.dtype.kind not in "biuf":  # (a complex or text answer would be cast, not refused)
+        raise ValueError(f"action must hold real numbers, got dtype {a.dtype}")
+    a = a.astype(np.float64)
     if a.ndim == 1:
         a = a[None]
     if a.ndim != 2 or a.shape[1] != ACTION_DIM or len(a) == 0:

@@ -19,16 +19,20 @@ LIMIT = 400
 
 
 def plain(value: Any) -> Any:
-    """``value`` as JSON writes it: numpy scalars and arrays, tuples and nested lists made plain."""
+    """``value`` as JSON writes it: numpy scalars and arrays, tuples and nested lists made plain;
+    TypeError for anything JSON has no value for (a set, a tensor, a path), here, where the
+    value is reported, rather than when the episode's record is written."""
     if isinstance(value, np.ndarray):
         return plain(value.tolist())
     if isinstance(value, np.generic):
-        return value.item()
+        return plain(value.item())
     if isinstance(value, (list, tuple)):
         return [plain(v) for v in value]
     if isinstance(value, dict):
         return {str(k): plain(v) for k, v in value.items()}
-    return value
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    raise TypeError(f"{type(value).__name__} is not a JSON value: {value!r:.80}")
 
 
 class Events:

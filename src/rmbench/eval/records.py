@@ -48,6 +48,9 @@ def read_records(path: Path, repair: bool = False) -> list[dict]:
             raise EvalError(f"{path}: line {n} is not an episode record (a record is one JSON "
                             f"object a line with {', '.join(RECORD_KEYS)}); mend or move the "
                             f"file") from None
+        wrong = _wrong_types(record)
+        if wrong:
+            raise EvalError(f"{path}: line {n}: {wrong}; mend or move the file")
         if record["seed"] not in seen:
             seen.add(record["seed"])
             records.append(record)
@@ -57,6 +60,19 @@ def read_records(path: Path, repair: bool = False) -> list[dict]:
         with open(path, "r+b") as f:
             f.truncate(good)
     return records
+
+
+def _wrong_types(record: dict) -> str:
+    """What in a record's ``RECORD_KEYS`` has a type no episode writes ('' if nothing): a seed
+    given as text would be played again and recorded twice, a success of null summed as 0."""
+    number = (int, float)
+    checks = (("seed", int, "an integer"), ("success", bool, "true or false"),
+              ("reason", str, "a text"), ("progress", number, "a number"))
+    for key, kind, what in checks:
+        value = record[key]
+        if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
+            return f"its {key} is {json.dumps(value)[:40]}, not {what}"
+    return ""
 
 
 @dataclass
