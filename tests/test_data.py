@@ -267,6 +267,30 @@ def test_an_overwrite_killed_part_way_can_overwrite_again(dataset, tmp_path, mon
     assert Dataset(root).num_episodes == 1
 
 
+def test_an_overwrite_killed_part_way_leaves_no_episode_without_its_data(dataset, tmp_path,
+                                                                          monkeypatch):
+    # the episodes' rows commit them: deleted first, a plain re-run after the kill collects
+    # the episodes again rather than resuming past ones whose data or videos are gone
+    real = writer._delete
+    for survives in (1, 2):  # info.json deleted; info.json and the episodes' rows
+        root = copy(dataset, tmp_path / str(survives))
+        deleted: list = []
+
+        def killed(path, deleted=deleted, survives=survives):
+            if len(deleted) == survives:
+                raise KeyboardInterrupt
+            deleted.append(path)
+            real(path)
+
+        monkeypatch.setattr(writer, "_delete", killed)
+        with pytest.raises(KeyboardInterrupt):
+            collect(small(root, episodes=1, overwrite=True))
+        monkeypatch.setattr(writer, "_delete", real)
+        left = 3 if survives == 1 else 0  # the episodes whose rows and data are still there
+        collect(small(root, episodes=left + 1))
+        assert check_dataset(root)["episodes"] == left + 1
+
+
 def test_a_damaged_episode_record_is_named_when_resuming(dataset, tmp_path):
     root = copy(dataset, tmp_path)
     (root / L.episodes_file(1)).write_bytes(b"")

@@ -112,6 +112,14 @@ def test_an_episode_record_of_bad_values_is_named(copied, name, value, said):
         _ = Dataset(copied).episodes
 
 
+def test_an_info_json_counting_fewer_episodes_than_are_committed_is_damage(copied):
+    info = json.loads((copied / L.INFO).read_text())
+    (copied / L.INFO).write_text(json.dumps({**info, "total_episodes": 1}))
+    with pytest.raises(DatasetError, match=r"info\.json counts 1 episodes, but .*file-001\.parquet "
+                                           r"holds one more"):
+        _ = Dataset(copied).episodes
+
+
 def test_records_of_the_wrong_shape_are_one_line_errors(copied):
     (copied / L.STATS).write_text("[]")
     with pytest.raises(DatasetError, match=r"stats\.json: not a JSON object \(a list\)"):

@@ -72,8 +72,10 @@ def _same_file(f: IO[str], path: Path) -> bool:
 @contextmanager
 def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     """A temporary path beside ``path`` for a writer that wants a file name (parquet, np.save):
-    renamed onto ``path`` when the block ends without an error, removed otherwise.
-    ``suffix`` keeps an extension a writer insists on (np.save appends ``.npy``)."""
+    renamed onto ``path`` when the block ends without an error, removed otherwise; its bytes
+    reach the disk before the rename and the folder's entry after it (as ``write_atomic``'s:
+    a dataset's episode row commits its episode, and must never outlive a power loss that its
+    data do not). ``suffix`` keeps an extension a writer insists on (np.save appends ``.npy``)."""
     path = Path(path)
     if path.is_dir():  # (the rename would fail after the work, naming the temporary file)
         raise IsADirectoryError(f"{path} is a folder, not a file to write")
@@ -81,9 +83,17 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp{suffix}")
     try:
         yield tmp
+        _sync_file(tmp)
         os.replace(tmp, path)
+        _sync_folder(path.parent)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def _sync_file(path: Path) -> None:
+    """Flush a file another writer closed to the disk."""
+    with open(path, "rb") as f:
+        os.fsync(f.fileno())
 
 
 _LEFTOVER = re.compile(r"^\..+\.(\d+)\.tmp(\.\w+)?$")  # atomic_path's temporary names
@@ -121,9 +131,6 @@ def write_atomic(path: str | Path, data: bytes) -> None:
     folder's entry after it, so that a power loss cannot bring back the file it replaced."""
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    _sync_folder(Path(path).parent)
 
 
 def _sync_folder(folder: Path) -> None:

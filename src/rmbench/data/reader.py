@@ -237,6 +237,11 @@ class Dataset:
     @cached_property
     def episodes(self) -> list[dict[str, Any]]:
         """Each episode's meta/episodes row, without its statistics columns."""
+        beyond = self.root / L.episodes_file(self.num_episodes)
+        if beyond.exists():  # (info.json lowered by hand would drop episodes without a word)
+            raise DatasetError(f"{self.root / L.INFO} counts {self.num_episodes} episodes, but "
+                               f"{beyond} holds one more: the dataset is damaged (or still being "
+                               f"written)")
         rows = []
         for e in range(self.num_episodes):
             path = self.root / L.episodes_file(e)

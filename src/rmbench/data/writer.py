@@ -328,8 +328,14 @@ class DatasetWriter:
     def _remove(self) -> None:
         if not (self.root / L.RMBENCH).exists() and _holds_files(self.root):
             raise DatasetError(f"refusing to delete {self.root}: it is not an rmbench dataset")
-        # all but the lock this writer holds, and rmbench.json last: a run killed part way
-        # leaves a folder still known as a dataset, which the next --overwrite deletes
+        # info.json and the episodes' rows first: the rows commit the episodes, so a run
+        # killed part way never leaves one whose data are gone, and info.json would count
+        # them (a plain re-run then resumes from what is left, or from nothing); then all but
+        # the lock this writer holds, and rmbench.json last: a run killed part way leaves a
+        # folder still known as a dataset, which the next --overwrite deletes
+        for first in (L.INFO, L.EPISODES_DIR):
+            if (self.root / first).exists():
+                _delete(self.root / first)
         mark = self.root / L.RMBENCH
         for path in [p for p in self.root.iterdir() if p.name != WRITING and p != mark.parent]:
             _delete(path)
