@@ -7,6 +7,7 @@ from rmbench.eval.intervals import (
     format_difference,
     format_rate,
     outside_noise,
+    paired_difference,
     wilson,
 )
 
@@ -41,6 +42,31 @@ def test_difference_of_two_cells():
     assert (lo, hi) == pytest.approx((0.0524, 0.3339), abs=5e-4)
     assert outside_noise(56, 70, 48, 80)
     assert not outside_noise(23, 100, 20, 100)  # three points apart at 100 episodes: noise
+
+
+def test_a_paired_difference_of_uncorrelated_pairs_is_the_independent_one():
+    # 25 both, 25 first only, 25 second only, 25 neither: phi = 0
+    assert paired_difference(25, 25, 25, 100) == pytest.approx(difference(50, 100, 50, 100))
+    with pytest.raises(ValueError, match="exceed n=10"):
+        paired_difference(5, 4, 3, 10)
+
+
+def test_a_paired_difference_covers_at_its_level_where_the_independent_one_overcovers():
+    """Pairs that mostly agree (a probe that changes few outcomes): the paired interval holds
+    the true difference about 95% of the time and is about half as wide; the independent
+    one, built for two separate samples, nearly always does and is twice as wide."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    n, p, rho = 100, 0.5, 0.8  # both rates 0.5, outcomes correlated 0.8
+    both = p * p + rho * p * (1 - p)
+    counts = rng.multinomial(n, [both, p - both, p - both, 1 - 2 * p + both], size=2000)
+    paired = np.array([paired_difference(a, b, c, n)[1:] for a, b, c, _ in counts])
+    apart = np.array([difference(a + b, n, a + c, n)[1:] for a, b, c, _ in counts])
+    covered = [np.mean((ci[:, 0] <= 0) & (0 <= ci[:, 1])) for ci in (paired, apart)]
+    width = [np.mean(ci[:, 1] - ci[:, 0]) for ci in (paired, apart)]
+    assert 0.93 <= covered[0] <= 0.97 and covered[1] > 0.99
+    assert width[0] < 0.55 * width[1]
 
 
 def test_format_rate():

@@ -262,6 +262,8 @@ def test_the_probe_resets_a_served_policy_over_the_wire(lookup):
 
 
 def test_compare_counts_the_episodes_the_probe_changed():
+    from rmbench.eval.intervals import paired_difference
+
     plain = [{"seed": s, "success": s < 8, "progress": 1.0} for s in range(10)]
     probed = [{"seed": s, "success": s in (0, 9), "progress": 0.5, "memory_resets": [3]}
               for s in range(10)]
@@ -269,3 +271,5 @@ def test_compare_counts_the_episodes_the_probe_changed():
     assert c["without"]["successes"] == 8 and c["with"]["successes"] == 2
     assert c["drop"] == 0.6 and c["changed"] == {"lost": 7, "gained": 1}
     assert c["drop_ci95"][0] > 0 and c["outside_noise"]
+    # the interval is the pairs': 1 both, 7 lost, 1 gained, 1 neither of 10
+    assert c["drop_ci95"] == [round(v, 4) for v in paired_difference(1, 7, 1, 10)[1:]]

@@ -8,6 +8,8 @@ comparison of two cells carries the interval of their difference.
   informative at 0/100 and 100/100, where the normal approximation collapses to a point).
 - ``difference``: Newcombe's hybrid score interval (method 10) for the difference of two
   independent rates, built from the two Wilson intervals.
+- ``paired_difference``: Newcombe's score interval for the difference of two rates measured
+  on the same episodes (method 10 of his paired-data paper), from the four pair counts.
 - ``format_difference``: a difference and its interval in points, as the docs print them.
 - ``share``: a count out of a total as results files store it, with its interval.
 """
@@ -56,6 +58,29 @@ def difference(k1: int, n1: int, k2: int, n2: int, z: float = Z95) -> tuple[floa
     d = p1 - p2
     low = d - math.sqrt((p1 - l1) ** 2 + (u2 - p2) ** 2)
     high = d + math.sqrt((u1 - p1) ** 2 + (p2 - l2) ** 2)
+    return d, max(-1.0, low), min(1.0, high)
+
+
+def paired_difference(both: int, first_only: int, second_only: int, n: int,
+                      z: float = Z95) -> tuple[float, float, float]:
+    """(d, low, high) for d = (both + first_only)/n - (both + second_only)/n, two rates over
+    the same ``n`` episodes (each seed run both ways): Newcombe's 1998 paired score interval
+    (method 10), ``difference``'s two Wilson intervals combined with the pairs' phi
+    correlation. Outcomes that mostly agree make it narrower than the independent one."""
+    neither = n - both - first_only - second_only
+    if min(both, first_only, second_only, neither) < 0:
+        raise ValueError(f"pair counts {both}, {first_only}, {second_only} exceed n={n}")
+    k1, k2 = both + first_only, both + second_only
+    p1, p2 = k1 / n, k2 / n
+    l1, u1 = wilson(k1, n, z)
+    l2, u2 = wilson(k2, n, z)
+    margins = k1 * (n - k1) * k2 * (n - k2)
+    phi = (both * neither - first_only * second_only) / math.sqrt(margins) if margins else 0.0
+    d = p1 - p2
+    low = d - math.sqrt(max(0.0, (p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2)
+                            + (u2 - p2) ** 2))
+    high = d + math.sqrt(max(0.0, (u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2)
+                             + (p2 - l2) ** 2))
     return d, max(-1.0, low), min(1.0, high)
 
 

@@ -22,7 +22,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from rmbench.eval.intervals import ci95, difference, outside_noise
+from rmbench.eval.intervals import ci95, paired_difference
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,9 @@ def arm_name(filename: str) -> str | None:
 
 def compare(plain: list[dict], probed: list[dict]) -> dict[str, Any]:
     """Rates with and without the probe on the seeds both arms ran, with their 95% intervals,
-    the difference (without minus with) and its interval, and how many probed episodes reached
+    the difference (without minus with) and its paired interval (each seed runs both ways, so
+    the outcomes are pairs: Newcombe's paired interval, narrower than the independent one
+    where the probe leaves most outcomes as they were), and how many probed episodes reached
     a reset at all (an episode that ends before the aliasing moment is never probed)."""
     by_seed = {r["seed"]: r for r in plain}
     pairs = [(by_seed[r["seed"]], r) for r in probed if r["seed"] in by_seed]
@@ -90,7 +92,9 @@ def compare(plain: list[dict], probed: list[dict]) -> dict[str, Any]:
         return {"episodes": 0}
     k0 = sum(a["success"] for a, _ in pairs)
     k1 = sum(b["success"] for _, b in pairs)
-    d, low, high = difference(k0, n, k1, n)
+    lost = sum(a["success"] and not b["success"] for a, b in pairs)
+    gained = sum(b["success"] and not a["success"] for a, b in pairs)
+    d, low, high = paired_difference(k0 - lost, lost, gained, n)
     return {"episodes": n, "reset_episodes": sum(bool(b.get("memory_resets")) for _, b in pairs),
             "without": {"successes": k0, "success_rate": round(k0 / n, 4),
                         "success_ci95": ci95(k0, n)},
@@ -98,7 +102,6 @@ def compare(plain: list[dict], probed: list[dict]) -> dict[str, Any]:
                      "success_ci95": ci95(k1, n),
                      "mean_progress": round(sum(b["progress"] for _, b in pairs) / n, 4)},
             "drop": round(d, 4), "drop_ci95": [round(low, 4), round(high, 4)],
-            "outside_noise": outside_noise(k0, n, k1, n),
+            "outside_noise": low > 0 or high < 0,
             # the same seeds on both arms: episodes whose outcome the probe changed
-            "changed": {"lost": sum(a["success"] and not b["success"] for a, b in pairs),
-                        "gained": sum(b["success"] and not a["success"] for a, b in pairs)}}
+            "changed": {"lost": lost, "gained": gained}}
