@@ -54,6 +54,7 @@ REFUSALS = {
     "tasks count": r"tasks, info\.json says",
     "stats object": r"stats\.json: not a JSON object",
     "stats key": r"no statistics for",
+    "stats values": r"is not the aggregate of the episodes' own statistics",
     "episode file missing": r"missing meta/episodes/chunk-000/file-003",
     "episode file beyond": r"beyond the 2 episodes",
     "episode index": r"episode_index 7, expected 1",
@@ -196,6 +197,9 @@ def corruptions(dataset):
     add("rmbench: unknown task", edit_json(L.RMBENCH, lambda d: d.update(task="nope")))
     add("stats: not an object", edit_json(L.STATS, lambda d: [d], replace=True))
     add("stats: no action", edit_json(L.STATS, lambda d: d.pop(L.ACTION)))
+    add("stats: action mean edited", edit_json(L.STATS, lambda d: d[L.ACTION]["mean"].__setitem__(
+        0, d[L.ACTION]["mean"][0] + 0.5)))
+    add("stats: action std text", edit_json(L.STATS, lambda d: d[L.ACTION].update(std="x")))
     add("tasks: no task_index", edit_parquet(L.TASKS, drop("task_index")))
     add("tasks: task_index text", edit_parquet(L.TASKS, replace_column("task_index", as_text)))
     add("tasks: task_index gap", edit_parquet(L.TASKS, replace_column(

@@ -17,6 +17,7 @@ import pyarrow as pa
 
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset, column, read_json, read_parquet
+from rmbench.data.stats import aggregate, pop_stats
 from rmbench.data.writer import DatasetError, subtask_ends
 from rmbench.video import probe_video
 
@@ -34,6 +35,25 @@ ARROW_TYPES = {"float32": pa.float32(), "int64": pa.int64(), "bool": pa.bool_()}
 
 def _fail(msg: str):
     raise DatasetError(msg)
+
+
+def _check_stats(ds: Dataset, stats: dict) -> None:
+    """meta/stats.json against what it aggregates, each episode's own statistics (its
+    meta/episodes row): the normalisers every training sets read it, so a value edited or
+    damaged there would train on a wrong scale without a word."""
+    _ = ds.episodes  # (the rows themselves checked first: one each, every column readable)
+    per_episode = [pop_stats({k: v[0] for k, v in read_parquet(
+        ds.root / L.episodes_file(e)).to_pydict().items()}) for e in range(ds.num_episodes)]
+    for key, want in aggregate(per_episode).items():
+        for stat, value in want.items():
+            got = stats.get(key, {}).get(stat) if isinstance(stats.get(key), dict) else None
+            try:
+                same = np.allclose(np.asarray(got, np.float64), value, rtol=1e-9, atol=1e-12)
+            except (TypeError, ValueError):  # (missing, text, another shape)
+                same = False
+            if not same:
+                _fail(f"{ds.root / L.STATS}: {key} {stat} is not the aggregate of the episodes' "
+                      f"own statistics (edited or damaged)")
 
 
 def check_dataset(root) -> dict:
@@ -90,6 +110,7 @@ def _check(root) -> dict:
               + (f"missing {missing[0]}" if missing else f"{extra[0]} beyond the "
                  f"{ds.num_episodes} episodes in info.json (an interrupted collection: re-run it "
                  f"to resume)"))
+    _check_stats(ds, stats)
     # an episode's data and videos are written before its meta/episodes row: files of one
     # past the committed count are an interrupted episode's (missing ones are named below)
     committed = {L.data_file(e) for e in range(ds.num_episodes)} | {
