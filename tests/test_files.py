@@ -76,6 +76,10 @@ def test_a_lock_whose_holder_removed_its_file_is_taken_on_the_new_file(tmp_path,
     with pytest.raises(files.Locked):
         files.lock(path)  # a newcomer finds it held
     held.close()
+    # a file replaced under every try is not waited on for ever
+    monkeypatch.setattr(files.fcntl, "flock", lambda f, op: (path.unlink(), real(f, op)))
+    with pytest.raises(files.Locked):
+        files.lock(path)
 
 
 def test_a_stage_record_that_is_not_an_object_reads_as_absent(tmp_path):

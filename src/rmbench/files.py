@@ -28,13 +28,16 @@ class Locked(RuntimeError):
         self.path, self.holder = path, holder
 
 
+_LOCK_TRIES = 8  # files locked in turn that their holders had already removed
+
+
 def lock(path: str | Path, wait: bool = False) -> IO[str]:
     """An exclusive lock on ``path`` (created, with this process's pid in it): the open file,
     whose closing releases it, as does the process's end however it ends; ``Locked`` if
     another process holds it, or with ``wait`` once that process lets it go."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    while True:
+    for _ in range(_LOCK_TRIES):
         f: IO[str] = open(path, "a+")
         try:
             fcntl.flock(f, fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -52,6 +55,8 @@ def lock(path: str | Path, wait: bool = False) -> IO[str]:
         # its holder removed the file before letting it go (a finished evaluation does): the
         # lock is on a file no other process can open, so take the one now at the path
         f.close()
+    else:
+        raise Locked(path, "") from None  # (replaced under every try: held by no one for long)
     f.seek(0)
     f.truncate()
     f.write(f"{os.getpid()}\n")

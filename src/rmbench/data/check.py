@@ -48,8 +48,10 @@ def _check_stats(ds: Dataset, stats: dict) -> None:
         for stat, value in want.items():
             got = stats.get(key, {}).get(stat) if isinstance(stats.get(key), dict) else None
             try:
-                same = np.allclose(np.asarray(got, np.float64), value, rtol=1e-9, atol=1e-12)
-            except (TypeError, ValueError):  # (missing, text, another shape)
+                got = np.asarray(got, np.float64)
+                same = got.shape == np.shape(value) and np.allclose(got, value, rtol=1e-9,
+                                                                    atol=1e-12)
+            except (TypeError, ValueError):  # (missing, text, ragged)
                 same = False
             if not same:
                 _fail(f"{ds.root / L.STATS}: {key} {stat} is not the aggregate of the episodes' "

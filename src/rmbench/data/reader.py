@@ -240,8 +240,9 @@ class Dataset:
         beyond = self.root / L.episodes_file(self.num_episodes)
         if beyond.exists():  # (info.json lowered by hand would drop episodes without a word)
             raise DatasetError(f"{self.root / L.INFO} counts {self.num_episodes} episodes, but "
-                               f"{beyond} holds one more: the dataset is damaged (or still being "
-                               f"written)")
+                               f"{beyond} holds one more: a collection stopped before it counted "
+                               f"its last episode (run it again to resume) or is still running, "
+                               f"or info.json was edited")
         rows = []
         for e in range(self.num_episodes):
             path = self.root / L.episodes_file(e)

@@ -330,7 +330,9 @@ class DatasetWriter:
             raise DatasetError(f"refusing to delete {self.root}: it is not an rmbench dataset")
         # info.json and the episodes' rows first: the rows commit the episodes, so a run
         # killed part way never leaves one whose data are gone, and info.json would count
-        # them (a plain re-run then resumes from what is left, or from nothing); then all but
+        # them (a plain re-run then resumes from what is left; or, killed among the rows,
+        # which go in no fixed order, refuses the gap as damage and asks for --overwrite,
+        # losing nothing more); then all but
         # the lock this writer holds, and rmbench.json last: a run killed part way leaves a
         # folder still known as a dataset, which the next --overwrite deletes
         for first in (L.INFO, L.EPISODES_DIR):
