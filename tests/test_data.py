@@ -246,23 +246,27 @@ def test_overwrite_starts_over_and_foreign_folders_are_safe(tmp_path):
     assert (foreign / "notes.txt").read_text() == "keep me"
 
 
-def test_an_overwrite_killed_part_way_can_overwrite_again(dataset, tmp_path, monkeypatch):
-    root = copy(dataset, tmp_path)
-    real = writer._delete
-    for survives in range(4):  # killed after 0, 1, 2, 3 deletions
-        deleted = []
+def overwrite_killed_after(root, survives: int, monkeypatch) -> None:
+    """An --overwrite of ``root`` killed after ``survives`` of its deletions."""
+    real, deleted = writer._delete, []
 
-        def killed(path, deleted=deleted, survives=survives):
-            if len(deleted) == survives:
-                raise KeyboardInterrupt
-            deleted.append(path)
-            real(path)
+    def killed(path):
+        if len(deleted) == survives:
+            raise KeyboardInterrupt
+        deleted.append(path)
+        real(path)
 
-        monkeypatch.setattr(writer, "_delete", killed)
+    with monkeypatch.context() as m:
+        m.setattr(writer, "_delete", killed)
         with pytest.raises(KeyboardInterrupt):
             collect(small(root, episodes=1, overwrite=True))
+
+
+def test_an_overwrite_killed_part_way_can_overwrite_again(dataset, tmp_path, monkeypatch):
+    root = copy(dataset, tmp_path)
+    for survives in range(4):  # killed after 0, 1, 2, 3 deletions
+        overwrite_killed_after(root, survives, monkeypatch)
         assert (root / L.RMBENCH).exists()  # still known as a dataset
-    monkeypatch.setattr(writer, "_delete", real)
     collect(small(root, episodes=1, overwrite=True))
     assert Dataset(root).num_episodes == 1
 
@@ -271,21 +275,9 @@ def test_an_overwrite_killed_part_way_leaves_no_episode_without_its_data(dataset
                                                                           monkeypatch):
     # the episodes' rows commit them: deleted first, a plain re-run after the kill collects
     # the episodes again rather than resuming past ones whose data or videos are gone
-    real = writer._delete
     for survives in (1, 2):  # info.json deleted; info.json and the episodes' rows
         root = copy(dataset, tmp_path / str(survives))
-        deleted: list = []
-
-        def killed(path, deleted=deleted, survives=survives):
-            if len(deleted) == survives:
-                raise KeyboardInterrupt
-            deleted.append(path)
-            real(path)
-
-        monkeypatch.setattr(writer, "_delete", killed)
-        with pytest.raises(KeyboardInterrupt):
-            collect(small(root, episodes=1, overwrite=True))
-        monkeypatch.setattr(writer, "_delete", real)
+        overwrite_killed_after(root, survives, monkeypatch)
         left = 3 if survives == 1 else 0  # the episodes whose rows and data are still there
         collect(small(root, episodes=left + 1))
         assert check_dataset(root)["episodes"] == left + 1
