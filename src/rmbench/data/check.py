@@ -17,7 +17,7 @@ import pyarrow as pa
 
 from rmbench.data import layout as L
 from rmbench.data.reader import Dataset, column, read_json, read_parquet
-from rmbench.data.stats import aggregate, pop_stats
+from rmbench.data.stats import aggregate
 from rmbench.data.writer import DatasetError, subtask_ends
 from rmbench.video import probe_video
 
@@ -42,8 +42,7 @@ def _check_stats(ds: Dataset, stats: dict) -> None:
     meta/episodes row): the normalisers every training sets read it, so a value edited or
     damaged there would train on a wrong scale without a word."""
     _ = ds.episodes  # (the rows themselves checked first: one each, every column readable)
-    per_episode = [pop_stats({k: v[0] for k, v in read_parquet(
-        ds.root / L.episodes_file(e)).to_pydict().items()}) for e in range(ds.num_episodes)]
+    per_episode = [ds.episode_stats(e) for e in range(ds.num_episodes)]
     for key, want in aggregate(per_episode).items():
         for stat, value in want.items():
             got = stats.get(key, {}).get(stat) if isinstance(stats.get(key), dict) else None

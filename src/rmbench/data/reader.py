@@ -268,11 +268,17 @@ class Dataset:
             rows.append(row)
         return rows
 
-    def image_stats(self, episode: int) -> dict[str, dict[str, np.ndarray]]:
-        """Each camera's statistics of one episode's frames (min, max, mean, std, count), as
-        its collection computed them (the episode's meta/episodes row)."""
+    def episode_stats(self, episode: int) -> dict[str, dict[str, np.ndarray]]:
+        """Every feature's statistics of one episode's frames (min, max, mean, std, count), as
+        its collection computed them (the episode's meta/episodes row); meta/stats.json
+        aggregates them."""
         path = self.root / L.episodes_file(episode)
-        stats = pop_stats({k: v[0] for k, v in read_parquet(path).to_pydict().items()})
+        return pop_stats({k: v[0] for k, v in read_parquet(path).to_pydict().items()})
+
+    def image_stats(self, episode: int) -> dict[str, dict[str, np.ndarray]]:
+        """Each camera's statistics of one episode's frames (``episode_stats``')."""
+        path = self.root / L.episodes_file(episode)
+        stats = self.episode_stats(episode)
         missing = [c for c in self.cameras if L.image_key(c) not in stats]
         if missing:
             raise DatasetError(f"{path}: no statistics of camera {missing[0]!r}")

@@ -53,11 +53,19 @@ def share(count: int, of: int) -> dict:
 def difference(k1: int, n1: int, k2: int, n2: int, z: float = Z95) -> tuple[float, float, float]:
     """(d, low, high) for d = k1/n1 - k2/n2, Newcombe's hybrid score interval, as fractions."""
     p1, p2 = k1 / n1 if n1 else 0.0, k2 / n2 if n2 else 0.0
-    l1, u1 = wilson(k1, n1, z)
-    l2, u2 = wilson(k2, n2, z)
+    return _combined(p1, wilson(k1, n1, z), p2, wilson(k2, n2, z))
+
+
+def _combined(p1: float, ci1: tuple[float, float], p2: float, ci2: tuple[float, float],
+              phi: float = 0.0) -> tuple[float, float, float]:
+    """Newcombe's square-and-add: (p1 - p2, low, high) from each rate's Wilson interval, the
+    two rates' correlation ``phi`` taken out (0 for independent samples)."""
+    (l1, u1), (l2, u2) = ci1, ci2
     d = p1 - p2
-    low = d - math.sqrt((p1 - l1) ** 2 + (u2 - p2) ** 2)
-    high = d + math.sqrt((u1 - p1) ** 2 + (p2 - l2) ** 2)
+    low = d - math.sqrt(max(0.0, (p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2)
+                            + (u2 - p2) ** 2))
+    high = d + math.sqrt(max(0.0, (u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2)
+                             + (p2 - l2) ** 2))
     return d, max(-1.0, low), min(1.0, high)
 
 
@@ -71,17 +79,9 @@ def paired_difference(both: int, first_only: int, second_only: int, n: int,
     if min(both, first_only, second_only, neither) < 0:
         raise ValueError(f"pair counts {both}, {first_only}, {second_only} exceed n={n}")
     k1, k2 = both + first_only, both + second_only
-    p1, p2 = k1 / n, k2 / n
-    l1, u1 = wilson(k1, n, z)
-    l2, u2 = wilson(k2, n, z)
     margins = k1 * (n - k1) * k2 * (n - k2)
     phi = (both * neither - first_only * second_only) / math.sqrt(margins) if margins else 0.0
-    d = p1 - p2
-    low = d - math.sqrt(max(0.0, (p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2)
-                            + (u2 - p2) ** 2))
-    high = d + math.sqrt(max(0.0, (u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2)
-                             + (p2 - l2) ** 2))
-    return d, max(-1.0, low), min(1.0, high)
+    return _combined(k1 / n, wilson(k1, n, z), k2 / n, wilson(k2, n, z), phi)
 
 
 def outside_noise(k1: int, n1: int, k2: int, n2: int, z: float = Z95) -> bool:
