@@ -1,17 +1,19 @@
 """Put-back loops in an evaluation's records: how often a piece left its place and came back to
 the same place, episode by episode, read from the predicates the task declares as places
 (``Task.place_predicates``: the place's index, or -1 while the piece is in none; swap_blocks'
-cube is in none while a finger touches it or it is off every tray). swap_blocks' cells mostly time out;
-this says whether they time out moving, or taking hold of a cube and letting it go in its own
-tray, again and again. How long each put-back kept the piece out of place is set beside how
-long each move did.
+cube is in none while a finger touches it or it is off every tray; blocks_ranking_try's row is
+its order, empty while a cube is held or off the slots). swap_blocks' and blocks_ranking_try's
+cells mostly time out; this says whether they time out moving, or taking hold of a cube and
+letting it go where it was, again and again, or stand still (no fact of the task changing in
+the last quarter of the step limit). How long each put-back kept the piece out of place is set
+beside how long each move did.
 
     .venv/bin/python benchmarks/put_back_loops.py --run LABEL=FOLDER [--run ...]
         [--loop 2] [--out benchmarks/results/put_back_loops.json]
 
 FOLDER is an ``rmbench eval`` folder of one task (its records, ``TASK/episodes.jsonl``). An
 episode loops where it holds at least ``--loop`` put-backs. A row per run, with Wilson 95%
-intervals, is written atomically to the JSON (a label given again replaces its row).
+intervals, is written atomically to the JSON (a task and label given again replace their row).
 """
 
 from __future__ import annotations
@@ -31,7 +33,11 @@ from rmbench.eval.rows import put_row
 from rmbench.tasks import get_task
 
 OUT = Path(__file__).resolve().parent / "results" / "put_back_loops.json"
-NONE = -1  # a place predicate's value while the piece is in no place (held, or between)
+NONE = (-1, [])  # a place predicate's value while its piece (or a piece of its row) is in none
+
+
+def in_place(value: Any) -> bool:
+    return value not in NONE
 
 
 def put_backs(record: dict[str, Any], places: tuple[str, ...]) -> tuple[Counter, list[int], list[int]]:
@@ -49,9 +55,9 @@ def put_backs(record: dict[str, Any], places: tuple[str, ...]) -> tuple[Counter,
         if key not in places:
             continue
         before = last.get(key)
-        if value == NONE and before is not None and before != NONE:
+        if not in_place(value) and before is not None and in_place(before):
             left[key] = (before, step)
-        elif value != NONE and before == NONE and key in left:
+        elif in_place(value) and before is not None and not in_place(before) and key in left:
             place, since = left.pop(key)
             if place == value:
                 out[stage] += 1
@@ -60,6 +66,13 @@ def put_backs(record: dict[str, Any], places: tuple[str, ...]) -> tuple[Counter,
                 moved.append(step - since)
         last[key] = value
     return out, back, moved
+
+
+def still_at_end(record: dict[str, Any], limit: int) -> bool:
+    """Whether no fact of the task changed in the episode's last quarter of ``limit`` steps:
+    the robot stood still, or moved touching nothing that counts."""
+    steps = [step for step, source, _, _ in record.get("events", []) if source == "task"]
+    return record["steps"] - max(steps, default=0) >= limit / 4
 
 
 def run_row(label: str, folder: Path, loop: int) -> dict:
@@ -91,6 +104,10 @@ def run_row(label: str, folder: Path, loop: int) -> dict:
         "failed_looping_mostly_in": dict(Counter(c.most_common(1)[0][0]
                                                  for _, c in failed_looping).most_common()),
         "put_backs_per_episode": [sum(c.values()) for _, c in per],
+        # the other way to time out: nothing the task counts changes any more
+        "timeouts_still": share(sum(still_at_end(r, get_task(task).step_limit)
+                                    for r, _ in per if ending(r) == "timeout"),
+                                endings.get("timeout", 0)),
         # how long a piece was out of place: a put-back against a move to another place
         "put_back_steps_median": float(np.median(back)) if back else None,
         "put_backs_within_10_steps": share(sum(n <= 10 for n in back), len(back)),
@@ -109,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         if not sep or not label:
             p.error(f"--run takes LABEL=FOLDER, got {item!r}")
         row = run_row(label, Path(folder), args.loop)
-        put_row(args.out, row, key=("label",))
+        put_row(args.out, row, key=("task", "label"))
         t = row["looped_by_ending"].get("timeout")
         print(f"{label}: {row['looped']['count']} of {row['episodes']} episodes loop"
               + (f"; {t['count']} of {t['of']} timeouts" if t else ""))

@@ -380,10 +380,12 @@ def put_back_loops() -> str:
         rows.append([r["task"], r["label"], r["split"], share_text(r["looped"]),
                      share_text(by.get("timeout", nothing)), share_text(by.get("success", nothing)),
                      f"{r['put_back_steps_median']:.0f} against {r['move_steps_median']:.0f}",
-                     "; ".join(f"{s} {n}" for s, n in r["failed_looping_mostly_in"].items())])
+                     "; ".join(f"{s} {n}" for s, n in r["failed_looping_mostly_in"].items()),
+                     share_text(r["timeouts_still"]) if "timeouts_still" in r else "(not kept)"])
     return markdown(["task", "checkpoint", "episodes", "episodes that loop", "of the timeouts",
-                     "of the successes", "steps out of its tray: put-back against move "
-                     "(medians)", "failed loops, by the stage most of their put-backs were in"],
+                     "of the successes", "steps out of place: put-back against move "
+                     "(medians)", "failed loops, by the stage most of their put-backs were in",
+                     "timeouts with no task fact changing in the last quarter of the step limit"],
                     rows)
 
 

@@ -33,3 +33,22 @@ def test_put_backs_read_the_places_the_task_declares(tmp_path):
                     "message": "", "progress": 1.0}) + "\n")
     with pytest.raises(SystemExit, match="put_back_block declares no place predicates"):
         loops.run_row("x", folder, loop=2)
+
+
+def test_a_row_set_back_in_its_own_order_is_a_put_back_and_a_new_order_a_move():
+    """blocks_ranking_try's place is its row: empty while a cube is held or off the slots, so
+    a cube lifted and set back leaves the order as it was (a put-back) and a swap changes it
+    (a move); the task declares it."""
+    from rmbench.tasks import get_task
+
+    loops = _loops()
+    places = get_task("blocks_ranking_try").place_predicates
+    assert places == ("row",)
+    events = [[0, "task", "subtask", "swap the middle and right blocks"],
+              [0, "task", "row", [2, 0, 1]], [0, "task", "presses", 1],
+              [80, "task", "row", []], [95, "task", "row", [2, 0, 1]],
+              [120, "task", "row", []], [500, "task", "row", [2, 1, 0]],
+              [520, "task", "subtask", "press the button to check the order"],
+              [600, "task", "row", []]]
+    out, back, moved = loops.put_backs({"events": events}, places)
+    assert (dict(out), back, moved) == ({"swap the middle and right blocks": 1}, [15], [380])

@@ -88,8 +88,9 @@ class Task:
     # rmbench.tasks.state for the shared encodings and docs/reference/observations.md).
     state_names: ClassVar[tuple[str, ...]] = ()
     # Predicates that hold where a piece is: the index of its place, or -1 while it is in none
-    # (held, or between places). Evaluation records carry them step by step, which is how a
-    # piece taken from its place and set back in the same one is told from a move.
+    # (held, or between places); or where several pieces are together (a row's order), empty
+    # while any is in none. Evaluation records carry them step by step, which is how a piece
+    # taken from its place and set back in the same one is told from a move.
     place_predicates: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self):

@@ -95,6 +95,9 @@ class BlocksRankingTry(Task):
     aliasing_point = "after a red verdict: the row looks like any other wrong order"
     aliasing_stage = 1
     hidden_keys = ("initial_order", "target_order")
+    # the row's order while every cube rests in a slot, [] while one is held or parked: a cube
+    # lifted and set back in its own slot leaves the row as it was
+    place_predicates = ("row",)
     # after a red verdict, the arm over the button: the same row reached by one swap and
     # shown at the start (the headline), and reached by two swaps
     aliasing_pairs = (
