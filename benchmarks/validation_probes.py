@@ -2,7 +2,8 @@
 given becomes one row of benchmarks/results/validation_probes.json (the task, what the
 checkpoint reads (state or pixels: which table the probe is for), the checkpoint and what the
 probe changes, success with its Wilson 95% interval, how the episodes ended and in which stage
-of the task's plan the failed ones did), so a recipe choice reads episodes that no table
+of the task's plan the failed ones did, and an M(n) policy's choices at the ends it declared
+against the plan, ``eval/decisions.py``), so a recipe choice reads episodes that no table
 reports.
 
     python benchmarks/validation_probes.py --probe "CHANGE=FOLDER" [--probe ...]
@@ -20,6 +21,7 @@ import filecmp
 import json
 from pathlib import Path
 
+from rmbench.eval.decisions import decision_counts
 from rmbench.eval.endings import failures_by_stage
 from rmbench.eval.records import read_records
 from rmbench.eval.rows import put_row
@@ -49,11 +51,15 @@ def probe_row(change: str, folder: Path) -> dict:
     if obs is None:
         raise SystemExit(f"{folder}: {run['policy']!r} is not a trained checkpoint whose "
                          f"config can be read, so the table it is for is not known")
-    failed_at = failures_by_stage(read_records(records)) if records.exists() else None
+    kept = read_records(records) if records.exists() else None
+    failed_at = failures_by_stage(kept) if kept is not None else None
+    # an M(n) policy's choices at the ends it declared: where its memory is read
+    decisions = decision_counts(kept) if kept is not None else None
     return {"task": task, "obs": obs, "change": change, "policy": run["policy"], "seed": run["seed"],
             "episodes": res["episodes"], "successes": res["successes"],
             "success_rate": res["success_rate"], "success_ci95": res["success_ci95"],
-            "endings": res["endings"], "failed_at": failed_at, "gym_id": res.get("gym_id"),
+            "endings": res["endings"], "failed_at": failed_at, "decisions": decisions,
+            "gym_id": res.get("gym_id"),
             "command": f"rmbench eval --task {task} --policy '{run['policy']}' --episodes "
                        f"{run['episodes']} --split validation --seed {run['seed']}"}
 

@@ -309,10 +309,22 @@ def validation_probes(obs: str = "state") -> str:
     probes = [p for p in (json.loads(path.read_text())["probes"] if path.exists() else [])
               if p["obs"] == obs]
     rows = [[p["task"], f"`{Path(split_policy(p['policy'])[1]).name.split('-s')[0]}`", p["change"],
-             rate(p), ", ".join(f"{k} {v}" for k, v in p["endings"].items() if v)]
+             rate(p), ", ".join(f"{k} {v}" for k, v in p["endings"].items() if v),
+             _decisions_text(p.get("decisions"))]
             for p in probes]
     return markdown(["task", "checkpoint (training seed)", "probe", "success (validation)",
-                     "endings"], rows)
+                     "endings", "planner's choices right at the ends declared on time or late"],
+                    rows)
+
+
+def _decisions_text(d: dict | None) -> str:
+    """'104 of 108; swap the left and right blocks 0 of 3', the plan's next subtasks it chose
+    wrong at least once after the total; '—' where not kept (or an M(1) task)."""
+    if not d:
+        return "—"
+    wrong = [f"{w} {c['right']} of {c['of']}" for w, c in d["by_next"].items()
+             if c["right"] < c["of"]]
+    return f"{d['right']} of {d['judged']}" + ("; " + "; ".join(wrong) if wrong else "")
 
 
 def planner_keys_pixels() -> str:

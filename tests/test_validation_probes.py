@@ -75,6 +75,24 @@ def test_a_probe_keeps_the_stage_its_failures_ended_in(probes, tmp_path):
     assert probes.probe_row("x", _eval(tmp_path / "b"))["failed_at"] is None  # no records kept
 
 
+def test_a_probe_keeps_the_planner_s_choices_where_the_policy_reports_its_subtask(probes, tmp_path):
+    """The choice at an end declared on time is judged against the plan's next subtask
+    (eval/decisions.py); records without a policy subtask keep none."""
+    folder = _eval(tmp_path / "a", successes=0)
+    (folder / "put_back_block").mkdir()
+    events = [[0, "task", "subtask", "move"], [0, "task", "subtask_step", 0],
+              [0, "policy", "subtask", "move"], [0, "policy", "subtask_ends", 0],
+              [90, "task", "subtask", "put back"], [90, "task", "subtask_step", 1],
+              [95, "policy", "subtask", "press"], [95, "policy", "subtask_ends", 1]]
+    (folder / "put_back_block" / "episodes.jsonl").write_text(json.dumps(
+        {"seed": 1, "success": False, "events": events, "reason": "timeout", "message": "",
+         "progress": 0.5, "steps": 500}) + "\n")
+    assert probes.probe_row("x", folder)["decisions"] == {
+        "judged": 1, "right": 0,
+        "by_next": {"put back": {"right": 0, "of": 1, "chose_instead": {"press": 1}}}}
+    assert probes.probe_row("x", _eval(tmp_path / "b"))["decisions"] is None
+
+
 def test_a_probe_says_which_table_its_checkpoint_reads_for(probes, tmp_path):
     assert probes.probe_row("x", _eval(tmp_path / "s"))["obs"] == "state"
     assert probes.probe_row("x", _eval(tmp_path / "p", obs="pixels"))["obs"] == "pixels"
