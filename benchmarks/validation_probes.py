@@ -3,8 +3,8 @@ given becomes one row of benchmarks/results/validation_probes.json (the task, wh
 checkpoint reads (state or pixels: which table the probe is for), the checkpoint and what the
 probe changes, success with its Wilson 95% interval, how the episodes ended and in which stage
 of the task's plan the failed ones did, and an M(n) policy's choices at the ends it declared
-against the plan, ``eval/decisions.py``), so a recipe choice reads episodes that no table
-reports.
+against the plan, ``eval/decisions.py``, with its planner's fit), so a recipe choice reads
+episodes that no table reports.
 
     python benchmarks/validation_probes.py --probe "CHANGE=FOLDER" [--probe ...]
         [--out benchmarks/results/validation_probes.json]
@@ -27,6 +27,7 @@ from rmbench.eval.records import read_records
 from rmbench.eval.rows import put_row
 from rmbench.policies.builtin import checkpoint_observation
 from rmbench.policies.config import split_policy
+from rmbench.suite.records import planner_report
 
 OUT = Path(__file__).resolve().parent / "results" / "validation_probes.json"
 
@@ -59,6 +60,7 @@ def probe_row(change: str, folder: Path) -> dict:
             "episodes": res["episodes"], "successes": res["successes"],
             "success_rate": res["success_rate"], "success_ci95": res["success_ci95"],
             "endings": res["endings"], "failed_at": failed_at, "decisions": decisions,
+            "planner": planner_report(Path(split_policy(run["policy"])[1])),
             "gym_id": res.get("gym_id"),
             "command": f"rmbench eval --task {task} --policy '{run['policy']}' --episodes "
                        f"{run['episodes']} --split validation --seed {run['seed']}"}

@@ -124,14 +124,23 @@ def cell_record(row: dict[str, Any], task: str) -> dict[str, Any]:
     # declared subtask ends against the simulator's: an M(1) task runs one subtask, the goal
     out["boundaries"] = boundary_counts(records) if get_task(task).tmc == "M(n)" else None
     out["failed_at"] = failures_by_stage(records)
-    planner = Path(row["checkpoint"]) / "training" / "planner.json"  # M(n) checkpoints only
-    out["planner"] = json.loads(planner.read_text()) if planner.exists() else None
+    out["planner"] = planner_report(Path(row["checkpoint"]))
     if row.get("executor_from"):  # a planner-only ablation: its executor is this run's
         out["executor_of"] = Path(row["executor_from"]).name
-    config = Path(row["checkpoint"]) / "config.json"
-    if out["planner"] is None and config.exists():  # a planner refit keeps its report there
-        out["planner"] = (json.loads(config.read_text()).get("planner_refit") or {}).get("report")
     return out
+
+
+def planner_report(checkpoint: Path) -> dict[str, Any] | None:
+    """A Mem-0 checkpoint's planner fit (decisions, steps, training accuracy, final loss):
+    its training's report, or a planner refit's in its config; None for a checkpoint
+    without a planner of its own (M(1), another policy)."""
+    planner = checkpoint / "training" / "planner.json"  # M(n) checkpoints only
+    if planner.exists():
+        return json.loads(planner.read_text())
+    config = checkpoint / "config.json"
+    if config.exists():  # a planner refit keeps its report there
+        return (json.loads(config.read_text()).get("planner_refit") or {}).get("report")
+    return None
 
 
 def evaluation_rows(folder: Path, spec: str) -> dict[str, Any]:
