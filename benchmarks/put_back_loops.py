@@ -81,7 +81,8 @@ def run_row(label: str, folder: Path, loop: int) -> dict:
     records = read_records(folder / task / "episodes.jsonl")
     if not records:
         raise SystemExit(f"{folder}: no episode records")
-    places = get_task(task).place_predicates
+    spec = get_task(task)
+    places = spec.place_predicates
     if not places:
         raise SystemExit(f"{folder}: {task} declares no place predicates to read put-backs from")
     found = [(r, *put_backs(r, places)) for r in records]
@@ -105,7 +106,7 @@ def run_row(label: str, folder: Path, loop: int) -> dict:
                                                  for _, c in failed_looping).most_common()),
         "put_backs_per_episode": [sum(c.values()) for _, c in per],
         # the other way to time out: nothing the task counts changes any more
-        "timeouts_still": share(sum(still_at_end(r, get_task(task).step_limit)
+        "timeouts_still": share(sum(still_at_end(r, spec.step_limit)
                                     for r, _ in per if ending(r) == "timeout"),
                                 endings.get("timeout", 0)),
         # how long a piece was out of place: a put-back against a move to another place

@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from rmbench.eval.events import capped
+
 # steps (0.6 s): Mem-0's event classifier learns the 12 frames after each end and declares
 # one after 8 of them in a row, so an end it detects on time is declared 8-12 frames after
 LATE = 12
@@ -84,9 +86,8 @@ def boundary_counts(records: list[dict]) -> dict[str, Any] | None:
     if not any(e[1] == "policy" and e[2] == "subtask_ends" for r in records
                for e in r.get("events", [])):
         return None
-    whole = [r for r in records
-             if not any(e[1:3] == ["events", "left_out"] for e in r.get("events", []))]
-    capped, records = len(records) - len(whole), whole
+    whole = [r for r in records if not capped(r)]
+    left_out, records = len(records) - len(whole), whole
     counts: Counter = Counter()
     first_wrong: Counter = Counter()
     delays = []
@@ -101,4 +102,4 @@ def boundary_counts(records: list[dict]) -> dict[str, Any] | None:
     return {"episodes": len(records), **{v: counts[v] for v in VERDICTS},
             "median_delay": float(np.median(delays)) if delays else None,
             "first_wrong": {v: first_wrong[v] for v in VERDICTS if first_wrong[v]},
-            **({"capped": capped} if capped else {})}
+            **({"capped": left_out} if left_out else {})}

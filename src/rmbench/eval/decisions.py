@@ -10,36 +10,43 @@ next subtask is the task's ``subtask`` once it counted the step.
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from collections import Counter, defaultdict
 from typing import Any
 
 from rmbench.eval.boundaries import classify, end_steps
+from rmbench.eval.events import capped
 
 JUDGED = ("on_time", "late")
 
 
-def _value_at(events: list[list], source: str, frame: int) -> Any:
-    """``source``'s last ``subtask`` value in events seen at or before ``frame``."""
-    value = None
-    for step, src, key, v in events:
-        if step is not None and step > frame:
-            break
-        if src == source and key == "subtask":
-            value = v
-    return value
+def _subtask_timeline(events: list[list], source: str) -> tuple[list[int], list[Any]]:
+    """``source``'s ``subtask`` changes, (the steps they were seen at, the values), in the
+    order the record keeps them (step order)."""
+    changes = [(step, value) for step, src, key, value in events
+               if step is not None and src == source and key == "subtask"]
+    return [s for s, _ in changes], [v for _, v in changes]
+
+
+def _value_at(timeline: tuple[list[int], list[Any]], frame: int) -> Any:
+    """The subtask in force once the events seen at ``frame`` are in (None before any)."""
+    steps, values = timeline
+    i = bisect_right(steps, frame)
+    return values[i - 1] if i else None
 
 
 def choices(record: dict[str, Any]) -> list[tuple[str, str]]:
     """One episode's judged choices, (the plan's next subtask, the policy's choice), in order."""
-    events = sorted(record.get("events", []), key=lambda e: -1 if e[0] is None else e[0])
+    events = record.get("events", [])
+    task, policy = _subtask_timeline(events, "task"), _subtask_timeline(events, "policy")
     last = record["steps"] - 1 if record.get("steps") else None
     out = []
     for entry in classify(*end_steps(events), last_frame=last):
         if entry["verdict"] not in JUDGED:
             continue
         # the task's subtask event comes after the env step that counted the step
-        wanted = _value_at(events, "task", entry["counted"] + 1)
-        chosen = _value_at(events, "policy", entry["declared"])
+        wanted = _value_at(task, entry["counted"] + 1)
+        chosen = _value_at(policy, entry["declared"])
         if wanted is not None and chosen is not None:
             out.append((wanted, chosen))
     return out
@@ -55,7 +62,7 @@ def decision_counts(records: list[dict[str, Any]]) -> dict[str, Any] | None:
         return None
     by: dict[str, Counter] = defaultdict(Counter)
     for r in records:
-        if any(e[1:3] == ["events", "left_out"] for e in r.get("events", [])):
+        if capped(r):
             continue  # its events passed the limit: the ends after it are not kept
         for wanted, chosen in choices(r):
             by[wanted][chosen] += 1

@@ -67,3 +67,9 @@ class Events:
                 if k not in self._kept or self._kept[k] != event[3]]
         return self.items + sorted(last, key=lambda e: e[0]) + [
             [None, "events", "left_out", self.left_out]]
+
+
+def capped(record: dict[str, Any]) -> bool:
+    """Whether an episode's events passed ``LIMIT``: the changes between the limit and each
+    fact's last value are not kept, so counts read from its events have gaps."""
+    return any(e[1:3] == ["events", "left_out"] for e in record.get("events", []))
