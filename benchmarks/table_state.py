@@ -61,7 +61,7 @@ from pathlib import Path
 from rmbench.eval.chance import chance
 from rmbench.files import write_json
 from rmbench.suite.cell_rows import pooled_row
-from rmbench.suite.plan import split_seed, with_seed
+from rmbench.suite.plan import parse_policy, split_seed, target_of, with_seed
 from rmbench.suite.records import (
     cell_record,
     evaluation_rows,
@@ -100,11 +100,27 @@ def _said(conditions: dict | None) -> tuple[dict, dict]:
 
 def _same_measure(task: str, column: str, new: dict, old: dict, what: str) -> None:
     """A SystemExit unless ``new`` (``what``, in words) was measured on ``old``'s dataset
-    format and task version: only then do they pool or stand side by side."""
-    (ours, our_id), (theirs, their_id) = measured_on(task, column, new), measured_on(task, column, old)
-    if (ours, our_id) != (theirs, their_id):
-        raise SystemExit(f"{task} {column}: {what} trained on {ours} ({our_id}), the "
-                         f"recorded cell on {theirs} ({their_id})")
+    format, task version and task items: only then do they pool or stand side by side."""
+    ours, theirs = measured_on(task, column, new), measured_on(task, column, old)
+    if ours != theirs:
+        items = ours[2] != theirs[2]  # (named where they differ)
+        said = ("{} ({})".format(*m[:2]) + (f", task items {m[2]}" if items else "")
+                for m in (ours, theirs))
+        raise SystemExit(f"{task} {column}: {what} trained on {next(said)}, the recorded "
+                         f"cell on {next(said)}")
+
+
+def items_of(run: dict, task: str, spec: str) -> dict:
+    """``{"task_items": [...]}``: the recipe's items for ``task`` alone (its plan's
+    ``task_sets``) that ``spec``'s policy trained with, those naming it
+    (``mem0.reach_input=...``) and those naming no policy; ``{}`` where ``run`` has no plan
+    to read them from (an evaluation's)."""
+    plan = run.get("plan") or {}
+    if "task_sets" not in plan:
+        return {}
+    name = parse_policy(spec)[0]
+    return {"task_items": [i for i in plan["task_sets"].get(task, ())
+                           if target_of(i)[0] in (None, name)]}
 
 
 def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:
@@ -150,8 +166,11 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
                 stated = stated_conditions(spec, stages, train_pieces, **said)
             except ValueError as err:
                 raise SystemExit(str(err)) from None
-            def kept(r: dict, stated=stated) -> dict:
-                return {"conditions": stated, **r, "dataset": dataset, "command": run["command"]}
+            items = items_of(run, task, spec)
+
+            def kept(r: dict, stated=stated, items=items) -> dict:
+                return {"conditions": stated, **r, "dataset": dataset, "command": run["command"],
+                        **items}
 
             new = kept(cell_record(row, task))
             if "seeds" in new:  # a column of several training seeds: each seed's record
@@ -224,7 +243,8 @@ def add_rerun(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset:
             except ValueError as err:
                 raise SystemExit(str(err)) from None
             new = {"task": task, "column": spec, "seed": seed, "conditions": stated,
-                   **cell_record(row, task), "dataset": dataset, "command": run["command"]}
+                   **cell_record(row, task), "dataset": dataset, "command": run["command"],
+                   **items_of(run, task, spec)}
             _same_measure(task, spec, new, old, "the re-run")
             reruns[:] = [r for r in reruns if (r["task"], r["column"], r["seed"], r["command"])
                          != (task, spec, seed, new["command"])] + [new]

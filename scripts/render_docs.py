@@ -35,7 +35,7 @@ from rmbench.eval.report import PUBLISHED, Rate, published_source
 from rmbench.files import write_atomic
 from rmbench.policies.config import split_policy
 from rmbench.suite.plan import COLUMNS, applies, executor_spec
-from rmbench.suite.records import measured_on, reads_subtask_cut, seed_records
+from rmbench.suite.records import measured_on, reads_subtask_cut, seed_records, task_items
 from rmbench.suite.tables import (
     ABLATION_TABLE,
     POLICY_TABLE,
@@ -57,7 +57,20 @@ COLUMN = {"mem0": "Mem-0", "mem0:no_memory": "`no_memory`", "mem0:no_anchor": "`
 
 
 def load(name: str) -> dict:
-    return json.loads((RESULTS / name).read_text())
+    res = json.loads((RESULTS / name).read_text())
+    return _recipe_marked(res) if name.startswith("table_") else res
+
+
+def _recipe_marked(res: dict) -> dict:
+    """``res`` (a table's results) with each Mem-0 ablation cell that trained with other task
+    items than its row's Mem-0 cell (``task_items``: a recipe change re-runs Mem-0 first)
+    flagged ``recipe_before``, which ``_older`` marks '§'."""
+    for row in res.get("cells", {}).values():
+        base = row.get("mem0")
+        for spec, cell in row.items():
+            if base is not None and spec.startswith("mem0:") and cell is not None:
+                cell["recipe_before"] = task_items(cell) != task_items(base)
+    return res
 
 
 def rate(cell: dict | None) -> str:
@@ -159,6 +172,8 @@ def _older(task: str, spec: str, cell: dict | None) -> str:
     if reads_subtask_cut(task, spec) and cell.get("dataset") != FORMAT:
         marks += "†"
     marks += _version_mark(cls, cell)
+    if cell.get("recipe_before"):
+        marks += "§"
     return f" {marks}" if marks else ""
 
 
@@ -166,7 +181,7 @@ def _footnote(table: str, lead: str = "", marks: str | None = None) -> str:
     """The notes under a table for the marks it holds, or for ``marks`` with ``lead`` (how a
     table that leaves such cells out says so, instead of the marks: its ``{mark}`` the one a
     left-out cell carries)."""
-    marks = ("†" if "†" in table else "") + ("‡" if "‡" in table else "") if marks is None else marks
+    marks = "".join(m for m in "†‡§" if m in table) if marks is None else marks
     notes = []
     if "†" in marks:
         notes.append(f"{lead.format(mark='†') if lead else '†'} trained on datasets older than "
@@ -177,6 +192,11 @@ def _footnote(table: str, lead: str = "", marks: str | None = None) -> str:
                      "the task than the one the README's tasks table names (what each version changed, "
                      "and why results before it are not mixed with those after: CHANGELOG.md); "
                      "not re-run on the current version yet.")
+    if "§" in marks:
+        notes.append(f"{lead.format(mark='§') if lead else '§'} trained without the items its "
+                     "task's recipe now adds for Mem-0 and its ablations, which the row's Mem-0 "
+                     "cell trained with (`task_sets` in `src/rmbench/suite/recipes.py`; "
+                     "CHANGELOG.md); not re-run with them yet.")
     return "".join(f"\n{n}\n" for n in notes)
 
 
@@ -247,7 +267,8 @@ def pixel_table() -> dict:
     """benchmarks/results/table_pixels.json with a row for every task (empty where none of its
     cells is recorded yet) and every task's chance level."""
     path = RESULTS / "table_pixels.json"
-    res = json.loads(path.read_text()) if path.exists() else {"cells": {}, "chance": {}}
+    res = (_recipe_marked(json.loads(path.read_text())) if path.exists()
+           else {"cells": {}, "chance": {}})
     cells = {t.name: res["cells"].get(t.name, {}) for t in ordered()}
     odds = {t.name: res["chance"].get(t.name) or {"rate": chance(t.name).rate} for t in ordered()}
     return {**res, "cells": cells, "chance": odds}

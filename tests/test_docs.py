@@ -173,3 +173,24 @@ def test_a_rerun_is_set_beside_the_seed_it_repeats_with_each_cpu(monkeypatch):
         "36 [27, 46] (AMD EPYC, avx2) | +8 [-5, +21] |")
     res["reruns"] = []
     assert docs.state_reruns() == "No seed has been trained again yet.\n"
+
+
+def test_an_ablation_without_its_rows_recipe_items_is_marked_and_kept_apart():
+    """After a recipe change re-runs a row's Mem-0, its ablations still trained without the
+    task's new items read '§', with a note saying so, and stand apart from Mem-0 in a
+    difference (``measured_on``); ablations trained with the same items read no mark."""
+    from rmbench.suite.records import measured_on
+
+    render_docs = _render_docs()
+    reach = ['mem0.reach_input=["cube_left"]']
+    row = {"mem0": {"task_items": reach, "dataset": "rmbench/2"},
+           "mem0:no_key": {"seeds": {"0": {"task_items": reach}, "1": {"task_items": reach}},
+                           "dataset": "rmbench/2"},
+           "mem0:no_memory": {"dataset": "rmbench/2"}, "dp": {}}
+    res = render_docs._recipe_marked({"cells": {"blocks_ranking_try": row}})
+    marks = {s: render_docs._older("blocks_ranking_try", s, c) for s, c in row.items()}
+    assert marks == {"mem0": "", "mem0:no_key": "", "mem0:no_memory": " §", "dp": ""}
+    assert res["cells"]["blocks_ranking_try"]["mem0:no_memory"]["recipe_before"]
+    assert "§ trained without the items" in render_docs._footnote("| 13 [8, 21] § |")
+    on = {s: measured_on("blocks_ranking_try", s, row[s]) for s in row if s != "dp"}
+    assert on["mem0"] == on["mem0:no_key"] != on["mem0:no_memory"]

@@ -88,6 +88,32 @@ def test_a_cell_of_another_recipe_moves_to_superseded_on_the_same_data(table_sta
     assert moved["cells"]["press_button"]["mem0"]["successes"] == 36
 
 
+def test_a_cell_keeps_its_tasks_recipe_items_and_other_items_do_not_pool(table_state):
+    """A table's plan names the items its recipe adds for one task alone: each cell keeps
+    those meant for its policy (Mem-0's, not DP's), and a cell of other items is another
+    recipe's measurement, so it replaces the recorded one under --why and never pools with
+    it as a seed."""
+    reach = 'mem0.reach_input=["cube_left"]'
+    plan = {"obs": "state", "policies": ["mem0", "dp"],
+            "task_sets": {"press_button": [reach, "dp.n_obs_steps=2"]}}
+    run = {**_run(), "plan": plan,
+           "cells": {"press_button": {"mem0": {"successes": 36}, "dp": {"successes": 3}}}}
+    with pytest.raises(SystemExit, match="--why"):
+        table_state.record(_doc(), run, ["press_button"], ["mem0"], "rmbench/2", None, "t")
+    doc = table_state.record(_doc(), run, ["press_button"], ["mem0", "dp"], "rmbench/2",
+                             "reach joints", "t")
+    assert doc["cells"]["press_button"]["mem0"]["task_items"] == [reach]
+    assert doc["cells"]["press_button"]["dp"]["task_items"] == ["dp.n_obs_steps=2"]
+    (moved,) = doc["superseded"]
+    assert moved["cells"]["press_button"]["mem0"] == {"successes": 2}
+    # a seed trained without the items does not join the cell trained with them
+    seed1 = {**_run(24), "plan": {"obs": "state", "policies": ["mem0@1"], "task_sets": {}},
+             "cells": {"press_button": {"mem0": {"successes": 24}}}}
+    with pytest.raises(SystemExit, match=r"task items \(\)"):
+        table_state.record(doc, seed1, ["press_button"], ["mem0"], "rmbench/2", None, "t",
+                           seed=1)
+
+
 def test_a_cell_not_evaluated_is_a_one_line_error(table_state):
     with pytest.raises(SystemExit, match="press_button mem0:no_key is not evaluated yet"):
         table_state.record(_doc(), _run(), ["press_button"], ["mem0:no_key"], "rmbench/2", "x", "t")

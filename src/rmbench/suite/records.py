@@ -195,11 +195,22 @@ def _evaluated_spec(policy: str, config: dict[str, Any]) -> str:
 
 
 def measured_on(task: str, column: str, cell: dict[str, Any]) -> tuple:
-    """What a cell was measured on: its dataset format (where the cell depends on it) and
-    task version. Cells of one such pair are one recipe's measurements; others do not replace,
-    pool with or stand beside them in a difference."""
+    """What a cell was measured on: its dataset format (where the cell depends on it), task
+    version and the recipe's items for its task alone (``task_items``). Cells of one such
+    triple are one recipe's measurements; others do not replace, pool with or stand beside
+    them in a difference."""
     fmt = cell.get("dataset") if reads_subtask_cut(task, column) else None
-    return fmt, recorded_gym_id(task, cell)
+    return fmt, recorded_gym_id(task, cell), task_items(cell)
+
+
+def task_items(cell: dict[str, Any]) -> tuple[str, ...]:
+    """The recipe's items for the cell's task alone that it trained with (``task_sets`` in
+    suite.recipes, those meant for its policy), as its record keeps them: none where the
+    record names none (a cell recorded before they were kept, of a task that had none)."""
+    if "task_items" in cell:
+        return tuple(cell["task_items"])
+    kept = {tuple(r.get("task_items", ())) for r in (cell.get("seeds") or {}).values()}
+    return kept.pop() if len(kept) == 1 else ()
 
 
 def reads_subtask_cut(task: str, column: str) -> bool:
