@@ -615,7 +615,7 @@ def _below_chance(res: dict, specs: list[str]) -> str:
     if not rows:
         return ""
     return ("\nBelow chance outside the noise: the cells whose whole interval lies under their "
-            "task's chance level (a † or ‡ marks the cell itself, as in the tables above).\n\n"
+            "task's chance level (a †, ‡ or § marks the cell itself, as in the tables above).\n\n"
             + markdown(["column", "below chance on (rate against chance, %)"], rows))
 
 
