@@ -946,10 +946,13 @@ def state_cost() -> str:
 
 
 def _one_eval(cell: dict) -> float | None:
-    """One evaluation's wall: a cell pooled over training seeds ran one per seed, and the
-    fastest is the one least slowed by the jobs beside it."""
-    walls = [r["eval_wall_s"] for r in seed_records(cell).values()]
-    return None if None in walls else min(walls)
+    """One evaluation's wall on one worker: a cell pooled over training seeds ran one per
+    seed, and the fastest is the one least slowed by the jobs beside it (a seed its record
+    says ran on more workers is left out)."""
+    walls = [r["eval_wall_s"] for r in seed_records(cell).values()
+             if all((c.get("workers") or 1) == 1
+                    for c in (r.get("conditions") or {}).get("eval", []))]
+    return None if not walls or None in walls else min(walls)
 
 
 def eval_walls() -> str:
