@@ -61,7 +61,7 @@ from pathlib import Path
 from rmbench.eval.chance import chance
 from rmbench.files import write_json
 from rmbench.suite.cell_rows import pooled_row
-from rmbench.suite.plan import parse_policy, split_seed, target_of, with_seed
+from rmbench.suite.plan import meant_for, parse_policy, split_seed, with_seed
 from rmbench.suite.records import (
     cell_record,
     evaluation_rows,
@@ -112,15 +112,12 @@ def _same_measure(task: str, column: str, new: dict, old: dict, what: str) -> No
 
 def items_of(run: dict, task: str, spec: str) -> dict:
     """``{"task_items": [...]}``: the recipe's items for ``task`` alone (its plan's
-    ``task_sets``) that ``spec``'s policy trained with, those naming it
-    (``mem0.reach_input=...``) and those naming no policy; ``{}`` where ``run`` has no plan
-    to read them from (an evaluation's)."""
+    ``task_sets``) that ``spec``'s policy trained with (``plan.meant_for``); ``{}`` where
+    ``run`` has no plan to read them from (an evaluation's)."""
     plan = run.get("plan") or {}
     if "task_sets" not in plan:
         return {}
-    name = parse_policy(spec)[0]
-    return {"task_items": [i for i in plan["task_sets"].get(task, ())
-                           if target_of(i)[0] in (None, name)]}
+    return {"task_items": meant_for(parse_policy(spec)[0], plan["task_sets"].get(task, ()))}
 
 
 def add_seed(old: dict | None, new: dict, seed: int, task: str, column: str) -> dict:

@@ -166,12 +166,16 @@ def sets_for(name: str, sets: tuple[str, ...] | list[str]) -> list[str]:
     """The ``--set`` items meant for policy ``name``, as FIELD=VALUE (``rmbench train``'s
     form): FIELD=VALUE where its config has the field (the others are another policy's), and
     POLICY.FIELD=VALUE naming it."""
-    mine = []
-    for item in sets:
-        policy, field = target_of(item)
-        if policy == name or (policy is None and field in policy_fields()[name]):
-            mine.append(f"{field}={item.partition('=')[2]}")
-    return mine
+    return [f"{target_of(item)[1]}={item.partition('=')[2]}" for item in meant_for(name, sets)]
+
+
+def meant_for(name: str, sets: tuple[str, ...] | list[str]) -> list[str]:
+    """The ``--set`` items among ``sets`` meant for policy ``name``, as given: those naming
+    it, and those naming no policy whose field its config has."""
+    fields = policy_fields()[name]
+    targets = [(item, *target_of(item)) for item in sets]
+    return [item for item, policy, field in targets
+            if policy == name or (policy is None and field in fields)]
 
 
 def config_for(spec: str, obs: str, sets: tuple[str, ...] | list[str] = ()):
