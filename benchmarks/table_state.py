@@ -26,6 +26,13 @@ pooled cell is replaced only seed by seed, never by a cell of one seed.
     python benchmarks/table_state.py --table runs/table_state --tasks press_button \\
         --specs mem0 --seed 1 --dataset rmbench/2
 
+``--withdraw`` moves recorded cells run on an earlier version of their task to
+``superseded`` under ``--why`` and leaves them empty, where re-running them is still to do;
+a cell of the current version is refused.
+
+    python benchmarks/table_state.py --withdraw --tasks cover_blocks --specs act \
+        --why "run on cover_blocks-v2; not re-run on the current version yet"
+
 ``--rerun`` records the source's cells as the recorded seed (``--seed``, else 0) trained
 again, on another machine or software: kept under ``reruns`` beside the cell, neither
 replacing nor pooling into it. Training is bit for bit on one machine, not across CPUs
@@ -69,7 +76,7 @@ from rmbench.suite.records import (
     seed_records,
     stated_conditions,
 )
-from rmbench.tasks.registry import recorded_gym_id
+from rmbench.tasks.registry import get_task, recorded_gym_id
 
 RESULTS = Path(__file__).resolve().parent / "results"
 OUT = RESULTS / "table_state.json"
@@ -206,15 +213,42 @@ def record(doc: dict, run: dict, tasks: list[str], specs: list[str], dataset: st
         raise SystemExit("--why: say why the cells this replaces no longer stand (" + ", ".join(
             f"{task} {spec}" for task, cells in replaced.items() for spec in cells) + ")")
     if replaced:
-        groups = [g for g in doc.get("superseded", []) if g["why"] != why]
-        same = next((g for g in doc.get("superseded", []) if g["why"] == why), None)
-        kept = same["cells"] if same else {}
-        for task, cells in replaced.items():
-            for spec, cell in cells.items():
-                # the cell a change replaced stays: recording the new recipe's cell again
-                # (under the same why) replaces that one, not the measurement before the change
-                kept.setdefault(task, {}).setdefault(spec, cell)
-        doc["superseded"] = groups + [{"why": why, "cells": kept}]
+        _supersede(doc, replaced, why)
+    return doc
+
+
+def _supersede(doc: dict, cells_by_task: dict[str, dict], why: str) -> None:
+    """Keep ``cells_by_task`` in ``doc``'s ``superseded`` group of ``why``."""
+    groups = [g for g in doc.get("superseded", []) if g["why"] != why]
+    same = next((g for g in doc.get("superseded", []) if g["why"] == why), None)
+    kept = same["cells"] if same else {}
+    for task, cells in cells_by_task.items():
+        for spec, cell in cells.items():
+            # the cell a change replaced stays: recording the new recipe's cell again
+            # (under the same why) replaces that one, not the measurement before the change
+            kept.setdefault(task, {}).setdefault(spec, cell)
+    doc["superseded"] = groups + [{"why": why, "cells": kept}]
+
+
+def withdraw(doc: dict, tasks: list[str], specs: list[str], why: str) -> dict:
+    """``doc`` with its cells of ``tasks`` x ``specs`` moved to ``superseded`` under ``why``,
+    each left empty in the table: for a cell run on an earlier version of its task that is not
+    re-run yet, so that no table or average mixes versions. A cell of the current version is
+    refused (withdrawing a measurement of what the table reports would choose its numbers)."""
+    if not why:
+        raise SystemExit("--why: say why the withdrawn cells no longer stand")
+    out: dict[str, dict] = {}
+    for task in tasks:
+        current = get_task(task).gym_id
+        for spec in specs:
+            cell = doc["cells"].get(task, {}).get(spec)
+            if cell is None:
+                raise SystemExit(f"{task} {spec}: no such cell in the table")
+            if recorded_gym_id(task, cell) == current:
+                raise SystemExit(f"{task} {spec}: ran on {current}, the current version; only "
+                                 f"a cell of an earlier version is withdrawn")
+            out.setdefault(task, {})[spec] = doc["cells"][task].pop(spec)
+    _supersede(doc, out, why)
     return doc
 
 
@@ -264,9 +298,14 @@ def main(argv: list[str] | None = None) -> int:
     source = p.add_mutually_exclusive_group(required=True)
     source.add_argument("--table", help="an `rmbench table` folder (its table.json)")
     source.add_argument("--evaluation", help="an `rmbench eval` folder of one checkpoint")
+    source.add_argument("--withdraw", action="store_true",
+                        help="move the recorded cells of --tasks x --specs, each run on an "
+                             "earlier version of its task, to superseded under --why, leaving "
+                             "them empty until re-run")
     p.add_argument("--tasks", required=True)
     p.add_argument("--specs", required=True)
-    p.add_argument("--dataset", required=True, help="the format the cells trained on (rmbench/N)")
+    p.add_argument("--dataset", help="the format the cells trained on (rmbench/N; needed "
+                                     "with --table or --evaluation)")
     p.add_argument("--why", help="why the replaced cells no longer stand, in words (a cell of "
                                   "other data or another task version moves to superseded)")
     p.add_argument("--recipe-changed", action="store_true",
@@ -312,6 +351,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.rerun and (args.why or args.recipe_changed or args.train_piece or args.data_note):
         raise SystemExit("--rerun replaces nothing and keeps no data walls: without "
                          "--why, --recipe-changed, --train-piece and --data-note")
+    if args.withdraw:
+        if not args.out.exists():
+            raise SystemExit(f"{args.out}: no such results file")
+        doc = withdraw(json.loads(args.out.read_text()), args.tasks.split(","),
+                       args.specs.split(","), args.why)
+        write_json(args.out, doc)
+        print(f"wrote {args.out}")
+        return 0
+    if not args.dataset:
+        raise SystemExit("--dataset: say the format the cells trained on (rmbench/N)")
     if args.evaluation and "," in args.specs:
         raise SystemExit("--evaluation records one column: give one --specs")
     try:

@@ -153,6 +153,26 @@ def _without_line(res: dict) -> str:
             "not memory).\n")
 
 
+def _withdrawn_line(res: dict, specs: list[str]) -> str:
+    """The note for the cells of ``specs`` withdrawn from the table (``benchmarks/
+    table_state.py --withdraw``): kept under ``superseded``, run on an earlier version of their
+    task, and not re-run on the current one yet; '' where there are none."""
+    gone: dict[str, list[str]] = {}
+    for group in res.get("superseded", []):
+        for task, cells in group["cells"].items():
+            for spec, cell in cells.items():
+                if (spec in specs and spec not in res["cells"].get(task, {})
+                        and recorded_gym_id(task, cell) != get_task(task).gym_id):
+                    gone.setdefault(spec, []).append(task)
+    if not gone:
+        return ""
+    said = "; ".join(f"{COLUMN[s]} on {_and(sorted(set(ts)))}" for s, ts in gone.items())
+    return (f"\n— ({said}): measured on an earlier version of the task only, and withdrawn "
+            "until run on the current version, so that no cell or average mixes "
+            "versions (the earlier cells: docs/history.md; what each version changed: "
+            "CHANGELOG.md).\n")
+
+
 def _version_mark(task: type, cell: dict) -> str:
     """'‡' for a record (a cell, an expert run) made on an earlier version of ``task``, the
     gym id it records (``recorded_gym_id``)."""
@@ -256,7 +276,7 @@ def readme_results() -> str:
                        + _chance_avg(res, g, w) + [_published_avg("Mem-0", g, w)])
     table = markdown(header, rows)
     return (table + _published_line() + _pixels_line(cams) + _without_line(res)
-            + _footnote(table))
+            + _withdrawn_line(res, specs) + _footnote(table))
 
 
 # ------------------------------------------------------------------ the camera table
@@ -512,7 +532,8 @@ def state_policies() -> str:
                        lambda g, w=(): [_published_avg(p, g, w) for p in published]
                        + _chance_avg(res, g, w))
     table = markdown(header, rows)
-    return table + _published_line() + _without_line(res) + _footnote(table)
+    return (table + _published_line() + _without_line(res) + _withdrawn_line(res, specs)
+            + _footnote(table))
 
 
 def _beside_published(rows: list[list[str]], specs: list[str]) -> list[list[str]]:
@@ -945,10 +966,12 @@ def state_cost() -> str:
     return markdown(["what", "count", "wall time"], rows)
 
 
-def _one_eval(cell: dict) -> float | None:
+def _one_eval(cell: dict | None) -> float | None:
     """One evaluation's wall on one worker: a cell pooled over training seeds ran one per
     seed, and the fastest is the one least slowed by the jobs beside it (a seed its record
-    says ran on more workers is left out)."""
+    says ran on more workers is left out); None for a cell not in the table."""
+    if cell is None:
+        return None
     walls = [r["eval_wall_s"] for r in seed_records(cell).values()
              if all((c.get("workers") or 1) == 1
                     for c in (r.get("conditions") or {}).get("eval", []))]
@@ -962,7 +985,7 @@ def eval_walls() -> str:
     for task in ordered():
         row = res["cells"][task.name]
         rows.append([task.name, task.step_limit,
-                     *(minutes(_one_eval(row[s])) for s in ("mem0", "dp", "act"))])
+                     *(minutes(_one_eval(row.get(s))) for s in ("mem0", "dp", "act"))])
     return markdown(["task", "step limit", "Mem-0", "DP", "ACT"], rows)
 
 

@@ -194,3 +194,18 @@ def test_an_ablation_without_its_rows_recipe_items_is_marked_and_kept_apart():
     assert "§ trained without the items" in render_docs._footnote("| 13 [8, 21] § |")
     on = {s: measured_on("blocks_ranking_try", s, row[s]) for s in row if s != "dp"}
     assert on["mem0"] == on["mem0:no_key"] != on["mem0:no_memory"]
+
+
+def test_a_withdrawn_cell_is_named_under_its_table_and_a_replaced_one_is_not():
+    """A cell of an earlier task version moved to superseded and not re-run reads '—' with a
+    note naming it; one that a current cell replaced is not named."""
+    from rmbench.tasks import get_task
+
+    render_docs = _render_docs()
+    old = {"gym_id": "rmbench/PressButton-v1"}
+    res = {"cells": {"press_button": {"dp": {"gym_id": get_task("press_button").gym_id}}},
+           "superseded": [{"why": "v1", "cells": {"press_button": {"act": old, "dp": old}}}]}
+    line = render_docs._withdrawn_line(res, ["dp", "act"])
+    assert "(ACT on press_button): measured on an earlier version" in line
+    assert "DP" not in line
+    assert render_docs._withdrawn_line(res, ["dp"]) == ""

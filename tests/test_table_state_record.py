@@ -1,6 +1,7 @@
 """benchmarks/table_state.py: recording a table run's cells in the committed state table
 replaces each cell and keeps every replaced measurement of other data under ``superseded``."""
 
+import json
 
 import pytest
 
@@ -135,6 +136,32 @@ def test_a_cell_of_another_task_version_moves_to_superseded(table_state):
     doc = table_state.record(doc, run, ["battery_try"], ["mem0"], "rmbench/2", "v2", "t")
     assert doc["cells"]["battery_try"]["mem0"]["successes"] == 40
     assert doc["superseded"][-1]["cells"]["battery_try"]["mem0"]["successes"] == 180
+
+
+def test_a_cell_of_an_earlier_version_is_withdrawn_and_a_current_one_is_refused(table_state,
+                                                                                   tmp_path):
+    """--withdraw empties a cell run on an earlier task version, keeping it under superseded;
+    a cell of the current version stays where it is, with a one-line error."""
+    from rmbench.tasks import get_task
+
+    current = get_task("battery_try").gym_id
+    doc = {"cells": {"battery_try": {"act": {"successes": 37, "gym_id": "rmbench/BatteryTry-v1"},
+                                     "dp": {"successes": 22, "gym_id": current}}},
+           "chance": {}, "superseded": []}
+    out = tmp_path / "table_state.json"
+    out.write_text(json.dumps(doc))
+    assert table_state.main(["--withdraw", "--tasks", "battery_try", "--specs", "act",
+                             "--why", "run on v1", "--out", str(out)]) == 0
+    kept = json.loads(out.read_text())
+    assert "act" not in kept["cells"]["battery_try"] and kept["cells"]["battery_try"]["dp"]
+    assert kept["superseded"] == [{"why": "run on v1", "cells": {"battery_try": {
+        "act": {"successes": 37, "gym_id": "rmbench/BatteryTry-v1"}}}}]
+    with pytest.raises(SystemExit, match=f"battery_try dp: ran on {current}, the current"):
+        table_state.withdraw(kept, ["battery_try"], ["dp"], "why")
+    with pytest.raises(SystemExit, match="--why"):
+        table_state.main(["--withdraw", "--tasks", "battery_try", "--specs", "dp",
+                          "--out", str(out)])
+    assert json.loads(out.read_text()) == kept  # nothing written by a refusal
 
 
 def test_an_evaluation_folder_gives_one_column_with_its_checkpoints_history(tmp_path):
