@@ -361,7 +361,7 @@ def validation_probes(obs: str = "state") -> str:
 def _decisions_text(d: dict | None) -> str:
     """'104 of 108; swap the left and right blocks 0 of 3', the plan's next subtasks it chose
     wrong at least once after the total; '—' where not kept (or an M(1) task)."""
-    if not d:
+    if not d or not d["judged"]:
         return "—"
     wrong = [f"{w} {c['right']} of {c['of']}" for w, c in d["by_next"].items()
              if c["right"] < c["of"]]
