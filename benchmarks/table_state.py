@@ -30,8 +30,8 @@ pooled cell is replaced only seed by seed, never by a cell of one seed.
 ``superseded`` under ``--why`` and leaves them empty, where re-running them is still to do;
 a cell of the current version is refused.
 
-    python benchmarks/table_state.py --withdraw --tasks cover_blocks --specs act \
-        --why "run on cover_blocks-v2; not re-run on the current version yet"
+    python benchmarks/table_state.py --withdraw --tasks cover_blocks --specs act \\
+        --why "run on cover_blocks-v1; not re-run on the current version yet"
 
 ``--rerun`` records the source's cells as the recorded seed (``--seed``, else 0) trained
 again, on another machine or software: kept under ``reruns`` beside the cell, neither
