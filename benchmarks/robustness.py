@@ -25,7 +25,7 @@ from pathlib import Path
 import rmbench  # noqa: F401  (before mujoco: picks the OpenGL backend)
 from rmbench.files import write_json
 from rmbench.robustness import sweep
-from rmbench.tasks.registry import get_task, ordered, recorded_gym_id
+from rmbench.tasks.registry import get_task, on_current_version, ordered
 
 ROOT = Path(__file__).resolve().parent
 CELLS = ROOT / "results" / "robustness"
@@ -79,7 +79,7 @@ def main() -> None:
                 if old.exists():
                     saved = json.loads(old.read_text())
                     if (saved["episodes"] >= args.episodes
-                            and recorded_gym_id(task, saved) == get_task(task).gym_id):
+                            and on_current_version(task, saved)):
                         continue
                 c = run_cell(task, kind, sigma, args.episodes, args.seed, args.workers, args.tau)
                 print(f"{task:<20} {kind:<6} {sigma:<5g} {c['successes']:>3}/{c['episodes']}"

@@ -76,7 +76,7 @@ from rmbench.suite.records import (
     seed_records,
     stated_conditions,
 )
-from rmbench.tasks.registry import get_task, recorded_gym_id
+from rmbench.tasks.registry import get_task, on_current_version, recorded_gym_id
 
 RESULTS = Path(__file__).resolve().parent / "results"
 OUT = RESULTS / "table_state.json"
@@ -239,14 +239,13 @@ def withdraw(doc: dict, tasks: list[str], specs: list[str], why: str) -> dict:
         raise SystemExit("--why: say why the withdrawn cells no longer stand")
     out: dict[str, dict] = {}
     for task in tasks:
-        current = get_task(task).gym_id
         for spec in specs:
             cell = doc["cells"].get(task, {}).get(spec)
             if cell is None:
                 raise SystemExit(f"{task} {spec}: no such cell in the table")
-            if recorded_gym_id(task, cell) == current:
-                raise SystemExit(f"{task} {spec}: ran on {current}, the current version; only "
-                                 f"a cell of an earlier version is withdrawn")
+            if on_current_version(task, cell):
+                raise SystemExit(f"{task} {spec}: ran on {get_task(task).gym_id}, the current "
+                                 f"version; only a cell of an earlier version is withdrawn")
             out.setdefault(task, {})[spec] = doc["cells"][task].pop(spec)
     _supersede(doc, out, why)
     return doc

@@ -43,7 +43,7 @@ from rmbench.suite.tables import (
     differences,
 )
 from rmbench.tasks import get_task
-from rmbench.tasks.registry import ordered, recorded_gym_id
+from rmbench.tasks.registry import on_current_version, ordered
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -162,7 +162,7 @@ def _withdrawn_line(res: dict, specs: list[str]) -> str:
         for task, cells in group["cells"].items():
             for spec, cell in cells.items():
                 if (spec in specs and spec not in res["cells"].get(task, {})
-                        and recorded_gym_id(task, cell) != get_task(task).gym_id):
+                        and not on_current_version(task, cell)):
                     gone.setdefault(spec, []).append(task)
     if not gone:
         return ""
@@ -176,7 +176,7 @@ def _withdrawn_line(res: dict, specs: list[str]) -> str:
 def _version_mark(task: type, cell: dict) -> str:
     """'‡' for a record (a cell, an expert run) made on an earlier version of ``task``, the
     gym id it records (``recorded_gym_id``)."""
-    return "‡" if recorded_gym_id(task.name, cell) != task.gym_id else ""
+    return "" if on_current_version(task.name, cell) else "‡"
 
 
 def _older(task: str, spec: str, cell: dict | None) -> str:

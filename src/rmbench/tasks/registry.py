@@ -46,6 +46,11 @@ def recorded_gym_id(task: str, record: dict) -> str:
     return record.get("gym_id") or UNRECORDED_VERSIONS.get(cls.name, cls.gym_id)
 
 
+def on_current_version(task: str, record: dict) -> bool:
+    """Whether a record was made on ``task``'s current version (``recorded_gym_id``)."""
+    return recorded_gym_id(task, record) == get_task(task).gym_id
+
+
 def get_task(name: str) -> type[Task]:
     """A task class by name (``put_back_block``) or gym id (``rmbench/PutBackBlock-v1``)."""
     if name in TASKS:
